@@ -1,0 +1,69 @@
+import os
+
+import pytest
+
+from stylize3d_core.errors import ExportError
+from stylize3d_core.io.atomic import atomic_path
+
+
+def test_success_replaces_destination(tmp_path):
+    dest = tmp_path / "out.txt"
+    dest.write_text("old")
+    with atomic_path(dest) as tmp:
+        assert tmp.parent == tmp_path and tmp.suffix == ".txt" and tmp != dest
+        tmp.write_text("new")
+        assert dest.read_text() == "old"
+    assert dest.read_text() == "new"
+    assert os.listdir(tmp_path) == ["out.txt"]
+
+
+def test_failure_keeps_old_file_and_cleans_up(tmp_path):
+    dest = tmp_path / "out.txt"
+    dest.write_text("old")
+    with pytest.raises(RuntimeError):
+        with atomic_path(dest) as tmp:
+            tmp.write_text("half")
+            raise RuntimeError("encoder died")
+    assert dest.read_text() == "old"
+    assert os.listdir(tmp_path) == ["out.txt"]
+
+
+def test_keyboard_interrupt_cleans_up(tmp_path):
+    dest = tmp_path / "x.bin"
+    with pytest.raises(KeyboardInterrupt):
+        with atomic_path(dest) as tmp:
+            tmp.write_bytes(b"123")
+            raise KeyboardInterrupt
+    assert os.listdir(tmp_path) == []
+
+
+def test_empty_output_is_an_error(tmp_path):
+    dest = tmp_path / "x.bin"
+    dest.write_bytes(b"good")
+    with pytest.raises(ExportError, match="empty"):
+        with atomic_path(dest):
+            pass
+    assert dest.read_bytes() == b"good"
+    assert os.listdir(tmp_path) == ["x.bin"]
+
+
+def test_missing_folder(tmp_path):
+    with pytest.raises(ExportError, match="does not exist"):
+        with atomic_path(tmp_path / "nope" / "x.png"):
+            pass
+
+
+def test_directory_mode(tmp_path):
+    dest = tmp_path / "frames"
+    dest.mkdir()
+    (dest / "old.png").write_text("o")
+    with atomic_path(dest, directory=True) as tmp:
+        (tmp / "frame_0000.png").write_text("n")
+    assert sorted(os.listdir(dest)) == ["frame_0000.png"]
+    assert os.listdir(tmp_path) == ["frames"]
+    with pytest.raises(ValueError):
+        with atomic_path(dest, directory=True) as tmp:
+            (tmp / "frame_0000.png").write_text("x")
+            raise ValueError("cancel")
+    assert (dest / "frame_0000.png").read_text() == "n"
+    assert os.listdir(tmp_path) == ["frames"]
