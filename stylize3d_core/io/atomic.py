@@ -21,6 +21,12 @@ from ..errors import ExportError
 PathLike = Union[str, "os.PathLike[str]"]
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 @contextlib.contextmanager
 def atomic_path(destination: PathLike, *, directory: bool = False) -> Iterator[Path]:
     """Yield a temporary path beside ``destination``; rename it into place on success.
@@ -40,10 +46,12 @@ def atomic_path(destination: PathLike, *, directory: bool = False) -> Iterator[P
         raise ExportError(f"{dest}: folder {parent} does not exist")
     if directory:
         tmp = Path(tempfile.mkdtemp(prefix=f".{dest.name}.", suffix=".partial", dir=parent))
+        os.chmod(tmp, 0o777 & ~_umask())
     else:
         fd, name = tempfile.mkstemp(prefix=f".{dest.stem}.", suffix=f".partial{dest.suffix}", dir=parent)
         os.close(fd)
         tmp = Path(name)
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes it 0600; give it a normal file's mode
     try:
         yield tmp
         if directory:

@@ -67,3 +67,14 @@ def test_directory_mode(tmp_path):
             raise ValueError("cancel")
     assert (dest / "frame_0000.png").read_text() == "n"
     assert os.listdir(tmp_path) == ["frames"]
+
+
+def test_written_file_gets_a_normal_mode(tmp_path):
+    dest = tmp_path / "x.txt"
+    mask = os.umask(0o022)
+    try:
+        with atomic_path(dest) as tmp:
+            tmp.write_text("x")
+    finally:
+        os.umask(mask)
+    assert dest.stat().st_mode & 0o777 == 0o644
