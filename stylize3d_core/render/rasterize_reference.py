@@ -1,0 +1,93 @@
+"""Slow, obvious reference of :func:`stylize3d_core.render.rasterize.rasterize_points`.
+
+Python loops over points and pixels, float64 throughout; for tests on small
+inputs only. Semantics (see the fast module's docstring) are spelled out step
+by step: cull, splat each point bilinearly onto its 2 x 2 (sub-)pixels, find the
+front-most depth per (sub-)pixel, keep the contributions within the relative
+depth tolerance, pool sub-pixels into output pixels, normalise.
+
+The image is built as ``A @ features`` with a dense (H*W, N) coefficient matrix
+``A``, so autograd gives the reference gradient with respect to the features.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import defaultdict
+
+import torch
+
+from ..checks import check_shape
+from ..errors import InputError
+from .rasterize import Fragments, RasterSettings
+
+
+def rasterize_points_reference(
+    points_cam: torch.Tensor, features: torch.Tensor, K: torch.Tensor, settings: RasterSettings
+) -> Fragments:
+    """Reference rasterizer: same arguments and result as ``rasterize_points``.
+
+    Args:
+        points_cam: (N, 3) points in the camera frame.
+        features: (N, C) features (gradients flow to them).
+        K: (3, 3) intrinsics at the output size.
+        settings: the raster settings.
+    Returns:
+        Fragments with image (C, H, W), weight (H, W), depth (H, W), hole (H, W),
+        computed in float64 and returned in the features' dtype.
+    """
+    check_shape(points_cam, "points_cam", (None, 3))
+    check_shape(features, "features", (points_cam.shape[0], None))
+    check_shape(K, "K", (3, 3))
+    if not torch.isfinite(K).all():
+        raise InputError("K", "contains NaN or infinite values")
+    s = settings.supersample
+    H, W = settings.height, settings.width
+    Hs, Ws = H * s, W * s
+    N, C = features.shape
+    k = K.detach().double().tolist()
+    fx, fy, cx, cy = k[0][0] * s, k[1][1] * s, k[0][2] * s, k[1][2] * s
+
+    # 1. Splat: sub-pixel (i, j) -> list of (point, weight, depth).
+    received = defaultdict(list)
+    for n, (x, y, z) in enumerate(points_cam.detach().double().tolist()):
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
+            continue
+        if z <= settings.near_clip:
+            continue
+        a = fx * x / z + cx - 0.5
+        b = fy * y / z + cy - 0.5
+        if not (-1 < a < Ws and -1 < b < Hs):
+            continue
+        x0, y0 = math.floor(a), math.floor(b)
+        tx, ty = a - x0, b - y0
+        for i, wy in ((y0, 1.0 - ty), (y0 + 1, ty)):
+            for j, wx in ((x0, 1.0 - tx), (x0 + 1, tx)):
+                w = wx * wy
+                if w > 0 and 0 <= i < Hs and 0 <= j < Ws:
+                    received[(i, j)].append((n, w, z))
+
+    # 2. Z-buffer per sub-pixel, keep the front surface, pool into output pixels.
+    A = torch.zeros(H * W, N, dtype=torch.float64)
+    wsum = torch.zeros(H * W, dtype=torch.float64)
+    depth = torch.full((H * W,), math.inf, dtype=torch.float64)
+    for (i, j), contributions in received.items():
+        zmin = min(z for _, _, z in contributions)
+        p = (i // s) * W + (j // s)
+        depth[p] = min(float(depth[p]), zmin)
+        for n, w, z in contributions:
+            if z <= zmin * (1.0 + settings.depth_tolerance):
+                A[p, n] += w
+                wsum[p] += w
+
+    # 3. Normalise; holes get zero.
+    hole = wsum < settings.hole_weight_threshold
+    for p in range(H * W):
+        if hole[p]:
+            A[p] = 0.0
+            depth[p] = math.inf
+        else:
+            A[p] /= wsum[p]
+    image = (A @ features.double()).T.reshape(C, H, W)
+    dtype = features.dtype
+    return Fragments(image.to(dtype), wsum.reshape(H, W).to(dtype), depth.reshape(H, W).to(dtype), hole.reshape(H, W))

@@ -1,0 +1,359 @@
+"""Tests of the point rasterizer: known values, the slow reference, gradients, bad inputs."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from stylize3d_core.errors import InputError
+from stylize3d_core.geometry.camera import Cameras, intrinsics_from_fov, transform_points
+from stylize3d_core.render import Fragments, PointRasterizer, RasterSettings, rasterize_points
+from stylize3d_core.render.rasterize_reference import rasterize_points_reference
+
+F64 = torch.float64
+
+
+@pytest.fixture(params=["fast", "reference"])
+def raster(request):
+    """Known-value tests run on both implementations."""
+    return rasterize_points if request.param == "fast" else rasterize_points_reference
+
+
+def simple_K(H: int = 6, W: int = 8, f: float = 10.0, dtype=F64) -> torch.Tensor:
+    return torch.tensor([[f, 0.0, W / 2], [0.0, f, H / 2], [0.0, 0.0, 1.0]], dtype=dtype)
+
+
+def point_at(u: float, v: float, z: float, K: torch.Tensor) -> list:
+    """Camera-frame point that projects to pixel coordinates (u, v) at depth z."""
+    return [(u - float(K[0, 2])) / float(K[0, 0]) * z, (v - float(K[1, 2])) / float(K[1, 1]) * z, z]
+
+
+def scene(K, specs, C=3, seed=0, dtype=F64):
+    """Points from (u, v, z) triples and random features."""
+    pts = torch.tensor([point_at(u, v, z, K) for u, v, z in specs], dtype=dtype).reshape(-1, 3)
+    feats = torch.randn(len(specs), C, generator=torch.Generator().manual_seed(seed), dtype=dtype)
+    return pts, feats
+
+
+def random_scene(H, W, N, C, seed, dtype=F64):
+    """Two depth layers (occlusions), duplicated points, and points to cull."""
+    g = torch.Generator().manual_seed(seed)
+    K = intrinsics_from_fov(55.0, H, W, dtype=dtype)
+    front = torch.rand(N, generator=g) < 0.5
+    z = torch.where(front, 1.0 + 0.015 * torch.rand(N, generator=g), 2.0 + 0.03 * torch.rand(N, generator=g))
+    u = torch.rand(N, generator=g) * (W + 3) - 1.5
+    v = torch.rand(N, generator=g) * (H + 3) - 1.5
+    z, u, v = z.to(dtype), u.to(dtype), v.to(dtype)
+    pts = torch.stack([(u - K[0, 2]) / K[0, 0] * z, (v - K[1, 2]) / K[1, 1] * z, z], dim=1)
+    pts[:4] = pts[4:8]  # coincident points
+    pts[8, 2] = -1.0  # behind the camera
+    pts[9, 2] = 0.0  # at the camera
+    pts[10, 0] = math.nan
+    pts[11, 1] = math.inf
+    feats = torch.randn(N, C, generator=g, dtype=dtype)
+    return pts, feats, K
+
+
+def assert_no_nan(frag: Fragments) -> None:
+    assert torch.isfinite(frag.image).all()
+    assert torch.isfinite(frag.weight).all()
+    assert not torch.isnan(frag.depth).any()
+    assert torch.isinf(frag.depth[frag.hole]).all() and torch.isfinite(frag.depth[~frag.hole]).all()
+
+
+# ----------------------------------------------------------------------------- known values
+
+
+def test_point_at_pixel_centre_lands_on_one_pixel(raster):
+    K = simple_K()
+    pts, feats = scene(K, [(2.5, 3.5, 2.0)])
+    frag = raster(pts, feats, K, RasterSettings(6, 8))
+    expected_weight = torch.zeros(6, 8, dtype=F64)
+    expected_weight[3, 2] = 1.0
+    assert torch.equal(frag.weight, expected_weight)
+    assert torch.allclose(frag.image[:, 3, 2], feats[0])
+    assert frag.image.abs().sum() == frag.image[:, 3, 2].abs().sum()
+    assert frag.depth[3, 2] == 2.0
+    assert frag.hole.sum() == 47 and not frag.hole[3, 2]
+    assert_no_nan(frag)
+
+
+def test_point_at_pixel_corner_splits_a_quarter_each(raster):
+    K = simple_K()
+    pts, feats = scene(K, [(3.0, 2.0, 1.5)])
+    frag = raster(pts, feats, K, RasterSettings(6, 8))
+    expected_weight = torch.zeros(6, 8, dtype=F64)
+    expected_weight[1:3, 2:4] = 0.25
+    assert torch.allclose(frag.weight, expected_weight, atol=1e-12)
+    for i, j in ((1, 2), (1, 3), (2, 2), (2, 3)):
+        assert torch.allclose(frag.image[:, i, j], feats[0])
+        assert frag.depth[i, j] == 1.5
+    assert frag.hole.sum() == 44
+
+
+def test_bilinear_weights(raster):
+    K = simple_K()
+    pts, feats = scene(K, [(2.75, 1.25, 1.0)])  # a = 2.25, b = 0.75
+    frag = raster(pts, feats, K, RasterSettings(6, 8))
+    assert frag.weight[0, 2].item() == pytest.approx(0.75 * 0.25)
+    assert frag.weight[0, 3].item() == pytest.approx(0.25 * 0.25)
+    assert frag.weight[1, 2].item() == pytest.approx(0.75 * 0.75)
+    assert frag.weight[1, 3].item() == pytest.approx(0.25 * 0.75)
+    assert frag.weight.sum().item() == pytest.approx(1.0)
+
+
+def test_nearer_point_occludes_farther_one(raster):
+    K = simple_K()
+    pts, feats = scene(K, [(2.5, 3.5, 3.0), (2.5, 3.5, 1.0)])
+    frag = raster(pts, feats, K, RasterSettings(6, 8))
+    assert torch.allclose(frag.image[:, 3, 2], feats[1])
+    assert frag.weight[3, 2] == 1.0 and frag.depth[3, 2] == 1.0
+
+
+def test_zero_weight_corner_does_not_occlude(raster):
+    # The near point sits exactly on the centre of pixel (3, 2): its corners on
+    # column 3 have weight 0 and must not hide the far point there.
+    K = simple_K()
+    pts, feats = scene(K, [(2.5, 3.5, 1.0), (3.75, 3.5, 2.0)])
+    frag = raster(pts, feats, K, RasterSettings(6, 8))
+    assert frag.weight[3, 3].item() == pytest.approx(0.75) and frag.depth[3, 3] == 2.0
+    assert torch.allclose(frag.image[:, 3, 3], feats[1])
+    assert frag.weight[3, 2] == 1.0 and torch.allclose(frag.image[:, 3, 2], feats[0])
+
+
+def test_points_within_depth_tolerance_blend(raster):
+    K = simple_K()
+    pts, feats = scene(K, [(2.5, 3.5, 1.01), (2.5, 3.5, 1.0), (2.5, 3.5, 1.03)])
+    frag = raster(pts, feats, K, RasterSettings(6, 8, depth_tolerance=0.02))
+    assert torch.allclose(frag.image[:, 3, 2], feats[:2].mean(0))
+    assert frag.weight[3, 2] == 2.0 and frag.depth[3, 2] == 1.0
+
+
+def test_coincident_points_average(raster):
+    K = simple_K()
+    pts, feats = scene(K, [(4.3, 2.2, 1.0)] * 3)
+    frag = raster(pts, feats, K, RasterSettings(6, 8))
+    assert torch.allclose(frag.weight.sum(), torch.tensor(3.0, dtype=F64))
+    touched = frag.weight > 0
+    assert torch.allclose(frag.image[:, touched], feats.mean(0)[:, None].expand(-1, 4))
+
+
+@pytest.mark.parametrize("spec", [(2.5, 3.5, -1.0), (2.5, 3.5, 0.0), (2.5, 3.5, 5e-4),
+                                  (-0.5, 3.5, 1.0), (8.5, 3.5, 1.0), (2.5, -3.0, 1.0), (40.0, 90.0, 2.0)])
+def test_culled_points_contribute_nothing(spec, raster):
+    K = simple_K()
+    pts, feats = scene(K, [spec, (6.5, 0.5, 1.0)])
+    frag = raster(pts, feats, K, RasterSettings(6, 8))
+    assert frag.weight.sum() == 1.0 and frag.weight[0, 6] == 1.0
+    assert frag.image.abs().sum() == frag.image[:, 0, 6].abs().sum()
+
+
+def test_point_just_outside_reaches_the_border(raster):
+    K = simple_K()
+    pts, feats = scene(K, [(-0.25, 2.5, 1.0)])  # a = -0.75: a quarter on column 0
+    frag = raster(pts, feats, K, RasterSettings(6, 8))
+    assert frag.weight[2, 0].item() == pytest.approx(0.25) and frag.weight.sum().item() == pytest.approx(0.25)
+
+
+def test_hole_threshold(raster):
+    K = simple_K()
+    pts, feats = scene(K, [(2.6, 3.5, 1.0)])  # weights 0.9 and 0.1
+    frag = raster(pts, feats, K, RasterSettings(6, 8, hole_weight_threshold=0.2))
+    assert not frag.hole[3, 2] and frag.hole[3, 3]
+    assert frag.weight[3, 3].item() == pytest.approx(0.1)
+    assert frag.image[:, 3, 3].abs().sum() == 0 and frag.depth[3, 3] == math.inf
+
+
+def test_supersample_point_at_pixel_centre(raster):
+    K = simple_K()
+    pts, feats = scene(K, [(2.5, 3.5, 2.0)])
+    frag = raster(pts, feats, K, RasterSettings(6, 8, supersample=2))
+    assert frag.weight[3, 2].item() == pytest.approx(1.0) and frag.weight.sum().item() == pytest.approx(1.0)
+    assert torch.allclose(frag.image[:, 3, 2], feats[0]) and frag.depth[3, 2] == 2.0
+
+
+def test_supersample_antialiases_an_occlusion_edge(raster):
+    # Near point on the left sub-pixel column of pixel (0, 0), far point on the right one.
+    K = simple_K()
+    pts, feats = scene(K, [(0.25, 0.25, 1.0), (0.75, 0.25, 2.0)])
+    ss = raster(pts, feats, K, RasterSettings(6, 8, supersample=2))
+    assert ss.weight[0, 0].item() == pytest.approx(2.0)
+    assert torch.allclose(ss.image[:, 0, 0], feats.mean(0)) and ss.depth[0, 0] == 1.0
+    plain = raster(pts, feats, K, RasterSettings(6, 8, supersample=1))
+    assert torch.allclose(plain.image[:, 0, 0], feats[0])  # the near point hides the far one
+
+
+def test_empty_and_all_culled():
+    K = simple_K()
+    for pts in (torch.zeros(0, 3, dtype=F64), torch.tensor([[0.0, 0.0, -1.0], [math.nan] * 3], dtype=F64)):
+        feats = torch.randn(pts.shape[0], 5, dtype=F64, requires_grad=True)
+        frag = rasterize_points(pts, feats, K, RasterSettings(6, 8))
+        assert frag.image.shape == (5, 6, 8) and frag.image.abs().sum() == 0
+        assert frag.hole.all() and torch.isinf(frag.depth).all() and frag.weight.abs().sum() == 0
+        frag.image.sum().backward()
+        assert feats.grad.shape == feats.shape and feats.grad.abs().sum() == 0
+
+
+@pytest.mark.parametrize("K", [
+    torch.tensor([[1e30, 0, 4], [0, 1e30, 3], [0, 0, 1]], dtype=torch.float32),
+    torch.tensor([[1e-30, 0, 4], [0, 1e-30, 3], [0, 0, 1]], dtype=torch.float32),
+    torch.tensor([[1e300, 0, 4], [0, 1e300, 3], [0, 0, 1]], dtype=F64),
+    torch.tensor([[0.0, 0, 1e20], [0, 0.0, -1e20], [0, 0, 1]], dtype=F64),
+    torch.tensor([[-10.0, 0, 4], [0, -10.0, 3], [0, 0, 1]], dtype=F64),
+])
+def test_extreme_intrinsics_and_positions_give_no_nan(K):
+    g = torch.Generator().manual_seed(3)
+    pts = torch.randn(200, 3, generator=g) * torch.tensor([1.0, 1.0, 3.0])
+    pts[::7] = pts[::7] * 1e30
+    pts[::11, 2] = 1e-30
+    pts[5] = math.inf
+    pts[6] = -math.inf
+    pts[7, 0] = math.nan
+    feats = torch.randn(200, 4, generator=g)
+    frag = rasterize_points(pts, feats, K, RasterSettings(6, 8, supersample=2))
+    assert_no_nan(frag)
+
+
+def test_inputs_are_not_mutated():
+    pts, feats, K = random_scene(5, 7, 40, 3, seed=1)
+    copies = (pts.clone(), feats.clone(), K.clone())
+    rasterize_points(pts, feats, K, RasterSettings(5, 7, supersample=2))
+    for a, b in zip((pts, feats, K), copies):
+        assert torch.equal(torch.isnan(a), torch.isnan(b)) and torch.equal(a.nan_to_num(), b.nan_to_num())
+
+
+def test_image_is_channels_last_view():
+    pts, feats, K = random_scene(5, 7, 40, 3, seed=2, dtype=torch.float32)
+    frag = rasterize_points(pts, feats, K, RasterSettings(5, 7))
+    assert frag.image.shape == (3, 5, 7) and frag.image.dtype == torch.float32
+    assert frag.image.unsqueeze(0).is_contiguous(memory_format=torch.channels_last)
+
+
+# ----------------------------------------------------------------------------- against the reference
+
+
+@pytest.mark.parametrize("supersample", [1, 2])
+@pytest.mark.parametrize("seed", range(4))
+def test_matches_reference_forward_and_backward(supersample, seed):
+    H, W = 7, 9
+    pts, feats, K = random_scene(H, W, 90, 4, seed)
+    settings = RasterSettings(H, W, supersample=supersample)
+    feats_a = feats.clone().requires_grad_(True)
+    feats_b = feats.clone().requires_grad_(True)
+    fast = rasterize_points(pts, feats_a, K, settings)
+    ref = rasterize_points_reference(pts, feats_b, K, settings)
+    assert torch.allclose(fast.image, ref.image, atol=1e-12)
+    assert torch.allclose(fast.weight, ref.weight, atol=1e-12)
+    assert torch.equal(fast.depth, ref.depth) and torch.equal(fast.hole, ref.hole)
+    assert 0 < fast.hole.sum() < H * W  # the scene has both holes and surface
+    upstream = torch.randn(4, H, W, dtype=F64, generator=torch.Generator().manual_seed(seed))
+    (fast.image * upstream).sum().backward()
+    (ref.image * upstream).sum().backward()
+    assert torch.allclose(feats_a.grad, feats_b.grad, atol=1e-12)
+
+
+def test_float32_matches_reference():
+    H, W = 12, 10
+    pts, feats, K = random_scene(H, W, 150, 3, seed=7, dtype=torch.float32)
+    settings = RasterSettings(H, W)
+    fast = rasterize_points(pts, feats, K, settings)
+    ref = rasterize_points_reference(pts, feats, K, settings)
+    assert torch.allclose(fast.image, ref.image, atol=1e-5)
+    assert torch.allclose(fast.weight, ref.weight, atol=1e-5)
+    assert torch.equal(fast.hole, ref.hole)
+
+
+@pytest.mark.parametrize("supersample", [1, 2])
+def test_gradcheck(supersample):
+    pts, feats, K = random_scene(4, 5, 24, 2, seed=11)
+    feats.requires_grad_(True)
+    settings = RasterSettings(4, 5, supersample=supersample)
+    assert torch.autograd.gradcheck(lambda f: rasterize_points(pts, f, K, settings).image, (feats,))
+
+
+def test_gradient_of_culled_points_is_zero_and_layout_does_not_matter():
+    H, W = 6, 7
+    pts, feats, K = random_scene(H, W, 50, 3, seed=9)
+    feats_t = feats.t().contiguous().requires_grad_(True)  # (C, N): its .t() is a non-contiguous (N, C)
+    frag = rasterize_points(pts, feats_t.t(), K, RasterSettings(H, W))
+    ref = rasterize_points_reference(pts, feats, K, RasterSettings(H, W))
+    assert torch.allclose(frag.image, ref.image, atol=1e-12)
+    frag.image.square().sum().backward()
+    assert feats_t.grad[:, 8:12].abs().sum() == 0  # behind, at the camera, NaN, inf
+
+
+# ----------------------------------------------------------------------------- the module
+
+
+def test_point_rasterizer_matches_function():
+    pts, feats, _ = random_scene(6, 8, 60, 3, seed=5)
+    pts = pts[12:]  # finite points only
+    feats = feats[12:]
+    pose = torch.eye(4, dtype=F64)
+    angle = 0.1
+    pose[:3, :3] = torch.tensor([[math.cos(angle), 0, math.sin(angle)], [0, 1, 0],
+                                 [-math.sin(angle), 0, math.cos(angle)]], dtype=F64)
+    pose[:3, 3] = torch.tensor([0.05, -0.02, 0.1], dtype=F64)
+    cameras = Cameras.create(pose, 50.0)
+    settings = RasterSettings(6, 8)
+    points_world = transform_points(pose, pts)
+    frag = PointRasterizer(settings)(points_world, feats, cameras)
+    expected = rasterize_points(pts, feats, intrinsics_from_fov(50.0, 6, 8, dtype=F64), settings)
+    assert torch.allclose(frag.image, expected.image, atol=1e-9)
+    assert torch.equal(frag.hole, expected.hole)
+
+
+def test_point_rasterizer_bad_inputs():
+    rast = PointRasterizer(RasterSettings(6, 8))
+    pts, feats = torch.rand(5, 3), torch.rand(5, 2)
+    two = Cameras.create(torch.eye(4).expand(2, 4, 4), 60.0)
+    with pytest.raises(InputError, match="one camera"):
+        rast(pts, feats, two)
+    with pytest.raises(InputError, match="points_world"):
+        rast(torch.rand(5, 2), feats, Cameras.identity())
+    with pytest.raises(InputError, match="settings"):
+        PointRasterizer({"height": 6})
+
+
+# ----------------------------------------------------------------------------- bad inputs
+
+
+@pytest.mark.parametrize("kwargs, name", [
+    (dict(height=0, width=8), "height"),
+    (dict(height=6.0, width=8), "height"),
+    (dict(height=True, width=8), "height"),
+    (dict(height=6, width=100000), "width"),
+    (dict(height=6, width=8, supersample=3), "supersample"),
+    (dict(height=6, width=8, depth_tolerance=-0.1), "depth_tolerance"),
+    (dict(height=6, width=8, depth_tolerance=math.nan), "depth_tolerance"),
+    (dict(height=6, width=8, hole_weight_threshold=0.0), "hole_weight_threshold"),
+    (dict(height=6, width=8, near_clip=0.0), "near_clip"),
+    (dict(height=6, width=8, near_clip=math.inf), "near_clip"),
+])
+def test_bad_settings(kwargs, name):
+    with pytest.raises(InputError, match=name):
+        RasterSettings(**kwargs)
+
+
+def test_bad_inputs():
+    K = simple_K()
+    s = RasterSettings(6, 8)
+    pts, feats = torch.rand(5, 3, dtype=F64), torch.rand(5, 2, dtype=F64)
+    cases = [
+        ((torch.rand(5, 2), feats, K, s), "points_cam"),
+        ((pts, torch.rand(4, 2), K, s), "features"),
+        ((pts, torch.rand(5), K, s), "features"),
+        ((pts, torch.rand(5, 0), K, s), "features"),
+        ((pts, feats.half(), K, s), "features"),
+        ((pts, torch.ones(5, 2, dtype=torch.long), K, s), "features"),
+        ((pts, torch.full((5, 2), math.nan), K, s), "features"),
+        ((pts, feats, K[:2], s), "K"),
+        ((pts, feats, K * math.inf, s), "K"),
+        ((pts, feats, K, {"height": 6, "width": 8}), "settings"),
+        ((pts.numpy(), feats, K, s), "points_cam"),
+    ]
+    for args, name in cases:
+        with pytest.raises(InputError, match=name):
+            rasterize_points(*args)
