@@ -1,0 +1,182 @@
+"""Private numpy / OpenCV helpers of the layered depth image (``ldi.py``).
+
+Nothing here validates its input: the public functions in ``ldi.py`` do.
+"""
+
+from __future__ import annotations
+
+from typing import List, NamedTuple, Tuple
+
+import cv2
+import numpy as np
+
+_ALPHA_GAIN = 4.0
+"""Push-pull: a pixel whose blurred source density is >= 1/_ALPHA_GAIN keeps its own estimate."""
+
+
+def cross_median(x: np.ndarray) -> np.ndarray:
+    """Median of each pixel and its 4 neighbours (a 5-point "+" window), edges replicated.
+
+    Unlike a 3x3 box median it keeps the corners of rectangles and 2-pixel-wide
+    structures, yet removes single-pixel outliers (speckle).
+
+    Args:
+        x: (H, W) float32.
+    Returns:
+        (H, W) float32, a new array.
+    """
+    p = np.pad(x, 1, mode="edge")
+    c = p[1:-1, 1:-1]
+    a, b = p[:-2, 1:-1], p[2:, 1:-1]  # up, down
+    d, e = p[1:-1, :-2], p[1:-1, 2:]  # left, right
+    # median(a, b, d, e, c) = median3(c, max(min(a,b), min(d,e)), min(max(a,b), max(d,e)))
+    lo = np.maximum(np.minimum(a, b), np.minimum(d, e))
+    hi = np.minimum(np.maximum(a, b), np.maximum(d, e))
+    return np.maximum(np.minimum(c, lo), np.minimum(np.maximum(c, lo), hi))
+
+
+def push_pull(values: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """Fill pixels of zero weight from the weighted ones (pyramid normalised convolution).
+
+    Push: Gaussian pyramids (``cv2.pyrDown``) of ``weight * values`` and of
+    ``weight``, until every coarse pixel has some support. Pull: from the coarsest
+    level down, each pixel keeps its own normalised estimate where its blurred
+    source density is high and takes the upsampled coarser estimate
+    (``cv2.pyrUp``) where it is low. Pixels of weight 1 keep their value exactly;
+    far from any source the fill is a blur whose radius grows with the distance.
+    Cost is linear in the number of pixels. Output values are convex combinations
+    of source values.
+
+    Args:
+        values: (H, W, C) float32, C <= 4.
+        weight: (H, W) float32 in [0, 1]; at least one pixel > 0.
+    Returns:
+        (H, W, C) float32 filled values.
+    """
+    w = weight.astype(np.float32)
+    wv = values.astype(np.float32) * w[..., None]  # (H, W, C)
+    wvs: List[np.ndarray] = [wv]
+    ws: List[np.ndarray] = [w]
+    while ws[-1].min() <= 1e-6 and min(ws[-1].shape) > 1:
+        wvs.append(_as3(cv2.pyrDown(wvs[-1])))
+        ws.append(cv2.pyrDown(ws[-1]))
+    est = wvs[-1] / np.maximum(ws[-1], 1e-12)[..., None]
+    for k in range(len(ws) - 2, -1, -1):
+        h, w_ = ws[k].shape
+        up = _as3(cv2.pyrUp(est, dstsize=(w_, h)))
+        own = wvs[k] / np.maximum(ws[k], 1e-12)[..., None]
+        alpha = np.minimum(ws[k] * (_ALPHA_GAIN if k > 0 else 1.0), 1.0)[..., None]
+        est = alpha * own + (1.0 - alpha) * up
+    return est.astype(np.float32, copy=False)
+
+
+def _as3(x: np.ndarray) -> np.ndarray:
+    """OpenCV drops a trailing channel axis of size 1: put it back."""
+    return x[..., None] if x.ndim == 2 else x
+
+
+class TornGraph(NamedTuple):
+    """Connected regions of an image whose 4-neighbour links are cut at discontinuities.
+
+    Attributes:
+        labels: (H, W) int32 region id of every pixel, from 1.
+        areas: (R,) int64 pixel count of every region id (``areas[0]`` = 0, unused).
+    """
+
+    labels: np.ndarray
+    areas: np.ndarray
+
+
+def torn_regions(cut_h: np.ndarray, cut_v: np.ndarray) -> TornGraph:
+    """Regions of pixels connected through links that are not cut.
+
+    The pixel graph is drawn on a (2H-1, 2W-1) grid: pixels at even
+    coordinates, the link between two 4-neighbours at the odd coordinate between
+    them (1 = linked), diagonal cells 0; ``cv2.connectedComponents`` with
+    4-connectivity then gives the regions.
+
+    Args:
+        cut_h: (H, W-1) bool, True where pixels (i, j) and (i, j+1) are torn apart.
+        cut_v: (H-1, W) bool, True where pixels (i, j) and (i+1, j) are torn apart.
+    """
+    h, w = cut_v.shape[0] + 1, cut_h.shape[1] + 1
+    grid = np.zeros((2 * h - 1, 2 * w - 1), np.uint8)
+    grid[::2, ::2] = 1
+    grid[::2, 1::2] = ~cut_h
+    grid[1::2, ::2] = ~cut_v
+    _, lab = cv2.connectedComponents(grid, connectivity=4, ltype=cv2.CV_32S)
+    labels = np.ascontiguousarray(lab[::2, ::2])  # (H, W)
+    return TornGraph(labels, np.bincount(labels.ravel()))
+
+
+def ring_min(values: np.ndarray, labels: np.ndarray, selected: np.ndarray) -> np.ndarray:
+    """Per selected region, the minimum of ``values`` over its outer 4-neighbours.
+
+    Args:
+        values: (H, W) float32.
+        labels: (H, W) int32 region ids.
+        selected: (R,) bool, the regions to measure.
+    Returns:
+        (R,) float32; +inf for regions that are not selected or have no neighbour.
+    """
+    out = np.full(selected.shape[0], np.inf, np.float32)
+    pairs: List[Tuple[slice, slice, slice, slice]] = [
+        (slice(None), slice(None, -1), slice(None), slice(1, None)),
+        (slice(None), slice(1, None), slice(None), slice(None, -1)),
+        (slice(None, -1), slice(None), slice(1, None), slice(None)),
+        (slice(1, None), slice(None), slice(None, -1), slice(None)),
+    ]
+    for r0, c0, r1, c1 in pairs:
+        lab_in, lab_out = labels[r0, c0], labels[r1, c1]
+        hit = selected[lab_in] & (lab_in != lab_out)
+        np.minimum.at(out, lab_in[hit], values[r1, c1][hit])
+    return out
+
+
+def nearest_index(targets: np.ndarray) -> np.ndarray:
+    """For every pixel, the index of the nearest True pixel of ``targets`` (L2, 5x5 mask).
+
+    The index counts the True pixels in raster order, so ``values[targets][index]``
+    copies, to every pixel, the value of its nearest target. ``targets`` must hold
+    at least one True pixel.
+
+    Returns:
+        (H, W) int32 indices into ``values[targets]``.
+    """
+    not_target = np.where(targets, 0, 255).astype(np.uint8)
+    _, labels = cv2.distanceTransformWithLabels(not_target, cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL)
+    # DIST_LABEL_PIXEL numbers the zero pixels from 1 in raster order, as boolean indexing orders them
+    return labels - 1
+
+
+def box_clusters(mask: np.ndarray, pad: int) -> List[Tuple[slice, slice, np.ndarray]]:
+    """Group the True pixels of ``mask`` into clusters and return padded boxes.
+
+    Pixels closer than about ``2 * pad`` end up in the same cluster (measured on
+    a coarse grid of cells of ``pad // 2`` pixels, so this is cheap). Each entry
+    is ``(rows, cols, members)`` with ``members`` (h, w) bool: the pixels of
+    ``mask`` inside the box that belong to this cluster. Every box reaches at
+    least ``pad`` pixels beyond its members (clipped to the image); boxes may
+    overlap, the clusters' members do not, and members of two clusters are
+    more than ``pad`` pixels apart.
+    """
+    h, w = mask.shape
+    cell = max(1, pad // 2)
+    gh, gw = -(-h // cell), -(-w // cell)
+    padded = np.zeros((gh * cell, gw * cell), bool)
+    padded[:h, :w] = mask
+    coarse = padded.reshape(gh, cell, gw, cell).any(axis=(1, 3)).astype(np.uint8)  # (gh, gw)
+    reach = 2 * (-(-pad // cell)) + 1
+    grown = cv2.dilate(coarse, np.ones((reach, reach), np.uint8))
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(grown, connectivity=8)
+    lab_full = np.repeat(np.repeat(lab, cell, axis=0), cell, axis=1)[:h, :w]  # (H, W)
+    boxes = []
+    for k in range(1, n):
+        x, y, bw, bh = stats[k, :4]
+        # the grown component already reaches >= pad pixels beyond its members
+        rows = slice(y * cell, min(h, (y + bh) * cell))
+        cols = slice(x * cell, min(w, (x + bw) * cell))
+        members = mask[rows, cols] & (lab_full[rows, cols] == k)
+        if members.any():
+            boxes.append((rows, cols, members))
+    return boxes
