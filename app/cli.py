@@ -47,7 +47,7 @@ def _add_render(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--fov", type=float, default=None,
                    help="vertical field of view of the photo in degrees (default: from EXIF, else 60)")
     p.add_argument("--supersample", type=int, choices=(1, 2), default=d.supersample,
-                   help=f"1 = fastest, 2 = anti-aliased edges (default {d.supersample})")
+                   help=f"1 = sharp and fast, 2 = smoother when the camera moves away (default {d.supersample})")
     p.add_argument("--camera-path", default=None, metavar="JSON",
                    help="follow the cameras of this camera-path JSON instead of --trajectory/--frames")
     p.add_argument("--save-camera-path", default=None, metavar="JSON", help="also write the cameras used")

@@ -46,7 +46,7 @@ class RenderJob:
         max_size: long side the photo is shrunk to before anything else. Default 1024.
         fov: vertical field of view of the photo in degrees; None (default) takes
             it from the photo's EXIF focal length, else 60.
-        supersample: 1 or 2 (default): rasterize at twice the size for smooth edges.
+        supersample: 1 (default) or 2: rasterize at twice the size (smoother when zooming out).
         camera_path: a camera-path JSON to follow instead of ``trajectory``/``frames``.
         save_camera_path: also write the cameras used to this JSON file.
         save_ply: also write the coloured point cloud to this PLY file.
@@ -61,7 +61,7 @@ class RenderJob:
     size: int = 512
     max_size: int = 1024
     fov: Optional[float] = None
-    supersample: int = 2
+    supersample: int = 1
     camera_path: Optional[str] = None
     save_camera_path: Optional[str] = None
     save_ply: Optional[str] = None

@@ -30,7 +30,11 @@ by 2 (z-buffer per sub-pixel) and pools back: a pixel's feature is the weighted
 mean of the kept contributions of its 2 x 2 sub-pixels (the average pool of
 ``w * f`` over the average pool of ``w``), its weight the *sum* of theirs (so
 every point deposits a total weight of 1 at either setting and the hole
-threshold means the same) and its depth the front-most of theirs.
+threshold means the same) and its depth the front-most of theirs. The
+splats of neighbouring points lie 2 sub-pixels apart at (2H, 2W), so the
+z-buffer test uses the nearest depth in each sub-pixel's 3 x 3 neighbourhood
+("visibility splatting"): a farther surface cannot show through the gaps of a
+nearer one, even when the camera magnifies it up to 2x.
 
 Implementation: the z-buffer is a ``scatter_reduce_("amin")`` over the corners
 of the points that survive culling; the feature accumulation is a sparse (H*W, N) matrix with
@@ -200,7 +204,17 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings) 
     zbuf[1:-1, 1:-1] = math.inf
     zbuf = zbuf.view(-1)
     zbuf.scatter_reduce_(0, q4, z4.view(-1), reduce="amin")
-    front = zbuf.index_select(0, q4).view(4, -1)  # (4, M)
+    if s == 2:
+        # Visibility splatting: a sub-pixel's front is the nearest depth in its 3 x 3
+        # neighbourhood, so a surface behind cannot show through the gaps between
+        # the 2 x 2 splats of a front surface (they are 2 sub-pixels apart).
+        zin = zbuf.view(Hs + 2, Wp)[1:-1, 1:-1]
+        near = -F.max_pool2d(-zin[None, None], 3, stride=1, padding=1)[0, 0]  # (Hs, Ws)
+        zfront = torch.full((Hs + 2, Wp), -math.inf, dtype=dtype, device=dev)
+        zfront[1:-1, 1:-1] = near
+        front = zfront.view(-1).index_select(0, q4).view(4, -1)  # (4, M)
+    else:
+        front = zbuf.index_select(0, q4).view(4, -1)  # (4, M)
     kept = (z4 <= front * (1.0 + settings.depth_tolerance)) & positive  # (4, M)
 
     # Output pixel of each corner: sub-pixel // s.

@@ -71,10 +71,13 @@ def rasterize_points_reference(
     A = torch.zeros(H * W, N, dtype=torch.float64)
     wsum = torch.zeros(H * W, dtype=torch.float64)
     depth = torch.full((H * W,), math.inf, dtype=torch.float64)
+    own_min = {key: min(z for _, _, z in c) for key, c in received.items()}
     for (i, j), contributions in received.items():
-        zmin = min(z for _, _, z in contributions)
+        zmin = own_min[(i, j)]
+        if s == 2:  # visibility splatting: the nearest depth of the 3 x 3 sub-pixel neighbourhood
+            zmin = min(own_min.get((i + di, j + dj), math.inf) for di in (-1, 0, 1) for dj in (-1, 0, 1))
         p = (i // s) * W + (j // s)
-        depth[p] = min(float(depth[p]), zmin)
+        depth[p] = min(float(depth[p]), own_min[(i, j)])
         for n, w, z in contributions:
             if z <= zmin * (1.0 + settings.depth_tolerance):
                 A[p, n] += w

@@ -174,15 +174,38 @@ def test_supersample_point_at_pixel_centre(raster):
     assert torch.allclose(frag.image[:, 3, 2], feats[0]) and frag.depth[3, 2] == 2.0
 
 
-def test_supersample_antialiases_an_occlusion_edge(raster):
-    # Near point on the left sub-pixel column of pixel (0, 0), far point on the right one.
+def test_supersample_visibility_splatting(raster):
+    # A far point on the sub-pixel right next to a near one is hidden (the gaps between
+    # a near surface's splats must not let the background through) ...
     K = simple_K()
     pts, feats = scene(K, [(0.25, 0.25, 1.0), (0.75, 0.25, 2.0)])
     ss = raster(pts, feats, K, RasterSettings(6, 8, supersample=2))
-    assert ss.weight[0, 0].item() == pytest.approx(2.0)
-    assert torch.allclose(ss.image[:, 0, 0], feats.mean(0)) and ss.depth[0, 0] == 1.0
+    assert ss.weight[0, 0].item() == pytest.approx(1.0)
+    assert torch.allclose(ss.image[:, 0, 0], feats[0]) and ss.depth[0, 0] == 1.0
+    # ... one two sub-pixels away is not, so an output pixel can still mix both surfaces.
+    pts, feats = scene(K, [(0.25, 0.25, 1.0), (1.25, 0.25, 2.0), (1.75, 0.25, 2.0)])
+    ss = raster(pts, feats, K, RasterSettings(6, 8, supersample=2))
+    assert ss.weight[0, 1].item() == pytest.approx(2.0)
+    assert torch.allclose(ss.image[:, 0, 1], feats[1:].mean(0))
     plain = raster(pts, feats, K, RasterSettings(6, 8, supersample=1))
-    assert torch.allclose(plain.image[:, 0, 0], feats[0])  # the near point hides the far one
+    assert torch.allclose(plain.image[:, 0, 0], feats[0])
+
+
+def test_supersample_hides_a_background_behind_a_magnified_surface(raster):
+    # A front surface sampled every 1.6 output pixels (magnified 1.6x) over a dense
+    # background: no background colour may show through at 2x supersampling.
+    K = simple_K(16, 16)
+    front = [(0.3 + 1.6 * i, 0.3 + 1.6 * j, 1.0) for i in range(10) for j in range(10)]
+    back = [(0.25 + 0.5 * i, 0.25 + 0.5 * j, 3.0) for i in range(32) for j in range(32)]
+    pts, _ = scene(K, front + back, C=1)
+    feats = torch.cat([torch.ones(len(front), 1), torch.zeros(len(back), 1)]).to(F64)
+    ss = raster(pts, feats, K, RasterSettings(16, 16, supersample=2))
+    shown = ~ss.hole[1:14, 1:14]
+    assert shown.float().mean() > 0.7
+    assert torch.allclose(ss.image[0, 1:14, 1:14][shown], torch.ones((), dtype=F64))
+    # At 1x the 2 x 2 splats of the front surface still overlap: no hole, no background.
+    plain = raster(pts, feats, K, RasterSettings(16, 16))
+    assert not plain.hole.any() and torch.allclose(plain.image, torch.ones((), dtype=F64))
 
 
 def test_empty_and_all_culled():
