@@ -1,0 +1,108 @@
+"""Inverse-distance-weighted (IDW) interpolation from sparse to dense points.
+
+Each dense point takes a weighted mean of the features of its 3 nearest sparse
+points, with weights ``1 / (d + eps)`` normalised to sum to 1 (``d`` the
+Euclidean distance). A dense point within ``eps`` of a sparse point takes that
+sparse point's feature exactly (weights ``[1, 0, 0]``), so a zero distance never
+makes an infinity or a NaN.
+
+The work splits in two, because the point positions are fixed for a photo and
+only the features change (with the style, or during training):
+
+* :func:`three_nn` finds the neighbours and weights once (not differentiable);
+* :func:`interpolate` gathers and blends features with them (differentiable
+  with respect to the features), as often as needed.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import torch
+
+from ..checks import check_finite, check_shape
+from ..errors import InputError
+from .neighbours import knn
+
+IDW_EPS = 1e-8
+"""Distance added before inverting, and the distance under which points coincide."""
+
+
+class IDWWeights(NamedTuple):
+    """Neighbours and weights of :func:`three_nn`; reusable for any features."""
+
+    idx: torch.Tensor  # (N, 3) long, indices into the sparse points, nearest first
+    weight: torch.Tensor  # (N, 3) float32, >= 0, each row sums to 1
+
+
+def idw_weights(dist: torch.Tensor, eps: float = IDW_EPS) -> torch.Tensor:
+    """Normalised IDW weights from distances ``dist`` (N, K) >= 0, nearest first.
+
+    Rows whose first distance is below ``eps`` become one-hot on column 0.
+    Computed in float64; returned in the dtype of ``dist``.
+    """
+    check_shape(dist, "dist", (None, None))
+    check_finite(dist, "dist")
+    if dist.numel() and float(dist.min()) < 0:
+        raise InputError("dist", f"distances must be >= 0, got {float(dist.min())}")
+    d = dist.double()  # (N, K)
+    w = 1.0 / (d + eps)  # (N, K), finite: d >= 0
+    w = w / w.sum(dim=1, keepdim=True)
+    coincide = d[:, :1] < eps  # (N, 1)
+    one_hot = torch.zeros_like(w)
+    one_hot[:, 0] = 1.0
+    return torch.where(coincide, one_hot, w).to(dist.dtype)
+
+
+def three_nn(dense: torch.Tensor, sparse: torch.Tensor) -> IDWWeights:
+    """The 3 nearest ``sparse`` points of every ``dense`` point, with IDW weights.
+
+    Args:
+        dense: (N, 3) points that receive features.
+        sparse: (M, 3) points that carry features, M >= 1. With M < 3 the
+            missing neighbours repeat the nearest one with weight 0.
+
+    Returns:
+        :class:`IDWWeights` with ``idx`` (N, 3) and ``weight`` (N, 3) float32.
+    """
+    res = knn(sparse, dense, 3)  # (N, 3) each
+    dist = res.sq_dist.double().clamp_min(0.0).sqrt()  # (N, 3)
+    weight = idw_weights(dist)  # (N, 3) float64
+    m = sparse.shape[0]
+    if m < 3:
+        real = torch.arange(3) < m  # (3,)
+        weight = torch.where(real, weight, torch.zeros_like(weight))
+        weight = weight / weight.sum(dim=1, keepdim=True)  # row sums >= weight[:, 0] > 0
+    return IDWWeights(res.idx, weight.float())
+
+
+def interpolate(features: torch.Tensor, idx: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
+    """Blend sparse ``features`` onto dense points: ``out[n] = sum_j weight[n, j] * features[idx[n, j]]``.
+
+    Differentiable with respect to ``features`` (and ``weight``). Memory stays at
+    a few (N, C) tensors: the neighbours are accumulated one column at a time
+    rather than gathered into an (N, K, C) tensor.
+
+    Args:
+        features: (M, C) features of the sparse points.
+        idx: (N, K) long indices into ``features`` (from :func:`three_nn`).
+        weight: (N, K) weights (from :func:`three_nn`), cast to the features' dtype.
+
+    Returns:
+        (N, C) interpolated features.
+    """
+    check_shape(features, "features", (None, None))
+    check_shape(idx, "idx", (None, None))
+    check_shape(weight, "weight", tuple(idx.shape))
+    if idx.dtype != torch.long:
+        raise InputError("idx", f"expected a long tensor, got {idx.dtype}")
+    if idx.numel() > 0 and (int(idx.min()) < 0 or int(idx.max()) >= features.shape[0]):
+        lo, hi = int(idx.min()), int(idx.max())
+        raise InputError("idx", f"indices must lie in [0, {features.shape[0]}), got [{lo}, {hi}]")
+    check_finite(weight, "weight")
+    w = weight.to(features.dtype)  # (N, K)
+    out = features.index_select(0, idx[:, 0]) * w[:, 0:1]  # (N, C)
+    for j in range(1, idx.shape[1]):
+        # in place: ``out`` is a fresh tensor that no backward function saved
+        out.addcmul_(features.index_select(0, idx[:, j]), w[:, j : j + 1])  # (N, C)
+    return out

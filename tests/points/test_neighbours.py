@@ -1,0 +1,132 @@
+import pytest
+import torch
+
+from stylize3d_core.errors import InputError
+from stylize3d_core.points import ball_query, knn
+from stylize3d_core.points.reference import ball_query_reference, knn_reference, pairwise_sq_dist
+
+
+def surface_cloud(h: int, w: int, jitter: float = 0.0, seed: int = 0) -> torch.Tensor:
+    """(h*w, 3) NDC-like points of a photo: a pixel grid over a bumpy surface with a depth step."""
+    g = torch.Generator().manual_seed(seed)
+    ys, xs = torch.meshgrid(torch.linspace(-1, 1, h), torch.linspace(-1, 1, w), indexing="ij")
+    xy = torch.stack([xs, ys], -1).reshape(-1, 2)
+    xy = xy + jitter * (torch.rand(xy.shape, generator=g) - 0.5) * (2.0 / w)
+    z = 0.2 * torch.sin(3 * xy[:, 0]) * torch.cos(2 * xy[:, 1]) + 0.6 * (xy[:, 0] > 0.3)
+    return torch.cat([xy, z[:, None]], 1)
+
+
+def rand(n, seed):
+    return torch.rand(n, 3, generator=torch.Generator().manual_seed(seed))
+
+
+def test_knn_matches_reference():
+    src, qry = rand(1500, 0), rand(300, 1)
+    fast, ref = knn(src, qry, 16), knn_reference(src, qry, 16)
+    assert fast.idx.dtype == torch.long and fast.idx.shape == (300, 16)
+    assert torch.equal(fast.idx, ref.idx)
+    torch.testing.assert_close(fast.sq_dist.double(), ref.sq_dist, rtol=1e-5, atol=1e-7)
+
+
+def test_ball_query_matches_reference_random():
+    src, qry = rand(2000, 2), rand(400, 3)
+    counts = []
+    for radius in [0.03, 0.08, 0.2]:
+        fast, ref = ball_query(src, qry, radius, 16), ball_query_reference(src, qry, radius, 16)
+        assert torch.equal(fast.count, ref.count)
+        assert torch.equal(fast.idx, ref.idx)
+        counts.append(fast.count)
+    counts = torch.cat(counts)
+    # empty, partly filled and capped balls all occur
+    assert {0, 16} <= set(counts.tolist()) and bool(((counts > 0) & (counts < 16)).any())
+
+
+def test_ball_query_matches_reference_jittered_surface():
+    xyz = surface_cloud(48, 64, jitter=0.5)
+    qry = xyz[::3]  # queries are points of the cloud, as in the encoder
+    fast, ref = ball_query(xyz, qry, 0.05, 16), ball_query_reference(xyz, qry, 0.05, 16)
+    assert torch.equal(fast.count, ref.count)
+    assert torch.equal(fast.idx, ref.idx)
+    # each point is its own nearest neighbour
+    assert torch.equal(fast.idx[:, 0], torch.arange(0, len(xyz), 3))
+
+
+def test_ball_query_exact_grid_ties_aside():
+    # A pixel grid has many equidistant neighbours: compare distances, not indices.
+    xyz = surface_cloud(40, 50)
+    r = 0.07  # not a multiple of the grid spacing
+    fast, ref = ball_query(xyz, xyz, r, 16), ball_query_reference(xyz, xyz, r, 16)
+    assert torch.equal(fast.count, ref.count)
+    d_fast = pairwise_sq_dist(xyz, xyz).gather(1, fast.idx)  # (N, 16)
+    d_ref = pairwise_sq_dist(xyz, xyz).gather(1, ref.idx)
+    torch.testing.assert_close(d_fast, d_ref, rtol=1e-5, atol=1e-9)
+    mask = fast.mask()
+    # valid neighbours are distinct, within the radius
+    for i in range(0, len(xyz), 97):
+        valid = fast.idx[i][mask[i]]
+        assert len(torch.unique(valid)) == len(valid)
+    assert bool((d_fast[mask] <= r * r + 1e-9).all())
+
+
+def test_padding_repeats_the_nearest():
+    src = torch.tensor([[0.0, 0, 0], [0.1, 0, 0], [0.2, 0, 0], [0.3, 0, 0], [5.0, 5, 5]])
+    qry = torch.tensor([[0.01, 0, 0], [-3.0, 0, 0]])
+    res = ball_query(src, qry, 0.15, 6)
+    assert res.count.tolist() == [2, 0]
+    assert res.idx.tolist() == [[0, 1, 0, 0, 0, 0], [0, 0, 0, 0, 0, 0]]
+    assert res.mask().tolist() == [[True, True] + [False] * 4, [False] * 6]
+
+
+def test_k_larger_than_cloud():
+    src = rand(5, 4)
+    res = ball_query(src, src, 10.0, 16)
+    assert res.idx.shape == (5, 16)
+    assert res.count.tolist() == [5] * 5
+    assert torch.equal(res.idx, ball_query_reference(src, src, 10.0, 16).idx)
+    k = knn(src, src[:2], 8)
+    assert k.idx.shape == (2, 8) and torch.equal(k.idx[:, 5:], k.idx[:, :1].expand(-1, 3))
+    assert torch.equal(k.idx, knn_reference(src, src[:2], 8).idx)
+
+
+def test_coincident_points():
+    src = torch.zeros(20, 3)
+    res = ball_query(src, src[:3], 0.01, 16)
+    assert res.count.tolist() == [16] * 3
+    assert all(len(torch.unique(row)) == 16 for row in res.idx)
+
+
+def test_single_point_and_empty_query():
+    src = torch.tensor([[0.5, 0.5, 0.5]])
+    res = ball_query(src, torch.tensor([[0.5, 0.5, 0.5], [0.0, 0.0, 0.0]]), 0.1, 4)
+    assert res.count.tolist() == [1, 0] and res.idx.tolist() == [[0] * 4] * 2
+    empty = ball_query(src, torch.zeros(0, 3), 0.1, 4)
+    assert empty.idx.shape == (0, 4) and empty.count.shape == (0,)
+
+
+def test_inputs_not_modified_and_float64_accepted():
+    src = rand(300, 5).double()
+    before = src.clone()
+    res = ball_query(src, src, 0.1, 8)
+    assert torch.equal(src, before)
+    assert torch.equal(res.count, ball_query_reference(src, src, 0.1, 8).count)
+
+
+@pytest.mark.parametrize(
+    "src, qry, radius, k",
+    [
+        (torch.rand(10, 2), torch.rand(3, 3), 0.1, 4),
+        (torch.rand(10, 3), torch.rand(3, 4), 0.1, 4),
+        (torch.rand(0, 3), torch.rand(3, 3), 0.1, 4),
+        (torch.rand(10, 3), torch.rand(3, 3), 0.0, 4),
+        (torch.rand(10, 3), torch.rand(3, 3), -1.0, 4),
+        (torch.rand(10, 3), torch.rand(3, 3), float("nan"), 4),
+        (torch.rand(10, 3), torch.rand(3, 3), 0.1, 0),
+        (torch.rand(10, 3), torch.rand(3, 3), 0.1, 2.0),
+        (torch.tensor([[float("inf"), 0, 0]]), torch.rand(3, 3), 0.1, 4),
+        (torch.rand(10, 3), torch.tensor([[float("nan"), 0, 0]]), 0.1, 4),
+        (torch.ones(10, 3, dtype=torch.int32), torch.rand(3, 3), 0.1, 4),
+    ],
+)
+def test_bad_inputs(src, qry, radius, k):
+    with pytest.raises(InputError):
+        ball_query(src, qry, radius, k)

@@ -1,0 +1,113 @@
+import pytest
+import torch
+
+from stylize3d_core.errors import InputError
+from stylize3d_core.points import farthest_point_sample
+from stylize3d_core.points.reference import coverage_radius, farthest_point_sample_reference
+from stylize3d_core.points.sampling import _tree_height
+
+
+def surface_cloud(h: int, w: int, jitter: float = 0.0, seed: int = 0) -> torch.Tensor:
+    """(h*w, 3) NDC-like points of a photo: a pixel grid over a bumpy surface with a depth step."""
+    g = torch.Generator().manual_seed(seed)
+    ys, xs = torch.meshgrid(torch.linspace(-1, 1, h), torch.linspace(-1, 1, w), indexing="ij")
+    xy = torch.stack([xs, ys], -1).reshape(-1, 2)
+    xy = xy + jitter * (torch.rand(xy.shape, generator=g) - 0.5) * (2.0 / w)
+    z = 0.2 * torch.sin(3 * xy[:, 0]) * torch.cos(2 * xy[:, 1]) + 0.6 * (xy[:, 0] > 0.3)
+    return torch.cat([xy, z[:, None]], 1)
+
+
+def test_matches_textbook_fps_random():
+    xyz = torch.rand(2000, 3, generator=torch.Generator().manual_seed(1))
+    idx = farthest_point_sample(xyz, 500)
+    assert idx.dtype == torch.long and idx.shape == (500,)
+    ref = farthest_point_sample_reference(xyz, 500, first=int(idx[0]))
+    assert torch.equal(idx, ref)
+
+
+@pytest.mark.parametrize("n_points, n_samples", [(64 * 48, 768), (150 * 140, 300)])
+def test_matches_textbook_fps_surface(n_points, n_samples):
+    # two sizes exercise two k-d tree heights of the bucket FPS
+    h = 64 if n_points == 64 * 48 else 150
+    xyz = surface_cloud(h, n_points // h, jitter=0.5)
+    idx = farthest_point_sample(xyz, n_samples)
+    ref = farthest_point_sample_reference(xyz, n_samples, first=int(idx[0]))
+    assert torch.equal(idx, ref)
+
+
+def test_coverage_radius_close_to_fps_from_point_zero():
+    xyz = surface_cloud(60, 80, jitter=0.5)
+    fast = coverage_radius(xyz, farthest_point_sample(xyz, 300))
+    ref = coverage_radius(xyz, farthest_point_sample_reference(xyz, 300, first=0))
+    assert fast <= 1.1 * ref and ref <= 1.1 * fast
+
+
+def test_deterministic_and_prefix_property():
+    xyz = torch.rand(3000, 3, generator=torch.Generator().manual_seed(2))
+    a = farthest_point_sample(xyz, 400, start=7)
+    b = farthest_point_sample(xyz, 400, start=7)
+    assert torch.equal(a, b)
+    # FPS of fewer points from the same seed is a prefix
+    assert torch.equal(farthest_point_sample(xyz, 100, start=7), a[:100])
+
+
+def test_duplicates_give_distinct_indices_like_the_reference():
+    base = torch.rand(10, 3, generator=torch.Generator().manual_seed(3))
+    xyz = base.repeat_interleave(10, dim=0)  # (100, 3): 10 positions, 10 copies each
+    idx = farthest_point_sample(xyz, 30)
+    assert len(torch.unique(idx)) == 30
+    # the first 10 picks cover every distinct position, in the textbook order
+    # (which of the equal copies is picked is a tie)
+    ref = farthest_point_sample_reference(xyz, 30, first=int(idx[0]))
+    assert torch.equal(xyz[idx[:10]], xyz[ref[:10]])
+    # then the unpicked points in ascending order
+    rest = [i for i in range(100) if i not in idx[:10].tolist()][:20]
+    assert idx[10:].tolist() == rest
+
+
+def test_all_coincident_points():
+    xyz = torch.full((100, 3), 0.25)
+    idx = farthest_point_sample(xyz, 50)
+    assert len(torch.unique(idx)) == 50 and int(idx.min()) >= 0 and int(idx.max()) < 100
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 7, 16])
+def test_tiny_clouds_and_all_points(n):
+    xyz = torch.rand(n, 3, generator=torch.Generator().manual_seed(n))
+    idx = farthest_point_sample(xyz, n)
+    assert sorted(idx.tolist()) == list(range(n))
+    assert len(farthest_point_sample(xyz, 1)) == 1
+
+
+def test_float64_input_not_modified():
+    xyz = torch.rand(500, 3, dtype=torch.float64, generator=torch.Generator().manual_seed(4))
+    before = xyz.clone()
+    farthest_point_sample(xyz, 100)
+    assert torch.equal(xyz, before)
+
+
+def test_tree_height_is_valid():
+    for n in [2, 3, 8, 100, 5000, 75_000, 300_000, 1_000_000, 10_000_000]:
+        h = _tree_height(n)
+        assert 1 <= h and 2**h <= n
+    assert _tree_height(300_000) == 8 and _tree_height(1_000_000) == 9
+
+
+@pytest.mark.parametrize(
+    "xyz, n, start",
+    [
+        (torch.rand(10, 2), 5, 0),
+        (torch.rand(0, 3), 1, 0),
+        (torch.rand(10, 3), 0, 0),
+        (torch.rand(10, 3), 11, 0),
+        (torch.rand(10, 3), 5, 10),
+        (torch.rand(10, 3), 5, -1),
+        (torch.rand(10, 3), 2.5, 0),
+        (torch.rand(10, 3), True, 0),
+        (torch.tensor([[0.0, 0.0, float("nan")]] * 4), 2, 0),
+        (torch.zeros(10, 3, dtype=torch.long), 5, 0),
+    ],
+)
+def test_bad_inputs(xyz, n, start):
+    with pytest.raises(InputError):
+        farthest_point_sample(xyz, n, start=start)
