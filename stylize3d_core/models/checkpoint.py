@@ -1,0 +1,137 @@
+"""Model checkpoints: safetensors weights plus the architecture and provenance as metadata.
+
+A checkpoint is one ``.safetensors`` file. Its metadata holds::
+
+    format   "stylize3d-model"
+    version  "1"
+    config   the ModelConfig as JSON (so the file alone rebuilds the model)
+    stage    "1" (view synthesis) or "2" (stylization)
+    info     free JSON: iterations, data, command, hours...
+
+Loading checks everything and raises :class:`InputError` naming the file for a
+missing or truncated file, a file that is not a stylize3d checkpoint, or weights
+that do not fit the architecture. Writing is atomic.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from pathlib import Path
+from typing import Any, Dict, NamedTuple, Union
+
+import torch
+
+from ..errors import InputError
+from ..io.atomic import atomic_path
+from .adaattn import AdaAttNConfig
+from .decoder import DecoderConfig
+from .encoder import EncoderConfig
+from .stylize3d import ModelConfig, Stylize3DModel
+
+FORMAT = "stylize3d-model"
+VERSION = "1"
+PathLike = Union[str, "os.PathLike[str]"]
+
+
+class Checkpoint(NamedTuple):
+    """A loaded checkpoint: the model (eval mode, CPU), its training stage and provenance."""
+
+    model: Stylize3DModel
+    stage: int
+    info: Dict[str, Any]
+
+
+def config_to_json(config: ModelConfig) -> str:
+    """The configuration as JSON (tuples become lists)."""
+    return json.dumps(dataclasses.asdict(config), sort_keys=True)
+
+
+def _tuples(x: Any) -> Any:
+    if isinstance(x, list):
+        return tuple(_tuples(v) for v in x)
+    return x
+
+
+def config_from_json(text: str, source: PathLike) -> ModelConfig:
+    """Rebuild a :class:`ModelConfig` from :func:`config_to_json`'s output."""
+    try:
+        d = json.loads(text)
+        enc = EncoderConfig(**{k: _tuples(v) for k, v in d["encoder"].items()})
+        sty = AdaAttNConfig(**{k: _tuples(v) for k, v in d["stylizer"].items()})
+        dec = DecoderConfig(**d["decoder"])
+        return ModelConfig(
+            name=d["name"], encoder=enc, stylizer=sty, raster_channels=int(d["raster_channels"]),
+            decoder=dec, encoder_max_points=int(d["encoder_max_points"]),
+        )
+    except (ValueError, KeyError, TypeError) as e:
+        raise InputError(source, f"the checkpoint's model configuration is unreadable ({e})") from None
+
+
+def save_checkpoint(path: PathLike, model: Stylize3DModel, stage: int, info: Dict[str, Any]) -> Path:
+    """Write ``model``'s weights (float32) with its configuration to ``path`` atomically."""
+    from safetensors.torch import save_file
+
+    if stage not in (1, 2):
+        raise InputError("stage", f"must be 1 or 2, got {stage!r}")
+    tensors = {k: v.detach().to("cpu", torch.float32).contiguous() for k, v in model.state_dict().items()
+               if v.is_floating_point()}
+    tensors.update({k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()
+                    if not v.is_floating_point()})
+    meta = {"format": FORMAT, "version": VERSION, "config": config_to_json(model.config),
+            "stage": str(stage), "info": json.dumps(info, sort_keys=True)}
+    with atomic_path(path) as tmp:
+        save_file(tensors, str(tmp), metadata=meta)
+    return Path(path)
+
+
+def load_checkpoint(path: PathLike) -> Checkpoint:
+    """Load a checkpoint written by :func:`save_checkpoint` (see the module docstring)."""
+    from safetensors import SafetensorError
+    from safetensors.torch import load_file
+
+    p = Path(path)
+    if not p.exists():
+        raise InputError(p, "model checkpoint not found")
+    if not p.is_file():
+        raise InputError(p, "is not a file")
+    if p.stat().st_size == 0:
+        raise InputError(p, "the checkpoint file is empty")
+    try:
+        from safetensors import safe_open
+
+        with safe_open(str(p), framework="pt") as f:
+            meta = f.metadata() or {}
+        tensors = load_file(str(p))
+    except (SafetensorError, OSError, ValueError, RuntimeError) as e:
+        raise InputError(p, f"not a readable safetensors checkpoint (truncated or corrupt?): {e}") from None
+    if meta.get("format") != FORMAT:
+        raise InputError(p, f"not a stylize3d model checkpoint (format {meta.get('format')!r})")
+    if meta.get("version") != VERSION:
+        raise InputError(p, f"checkpoint version {meta.get('version')!r} is not supported (expected {VERSION})")
+    config = config_from_json(meta.get("config", ""), p)
+    model = Stylize3DModel(config)
+    missing, unexpected = [], []
+    own = model.state_dict()
+    for k in own:
+        if k not in tensors:
+            missing.append(k)
+    for k in tensors:
+        if k not in own:
+            unexpected.append(k)
+    if missing or unexpected:
+        raise InputError(p, f"weights do not match the architecture: missing {missing[:5]}, unexpected {unexpected[:5]}")
+    for k, v in own.items():
+        if tuple(tensors[k].shape) != tuple(v.shape):
+            raise InputError(p, f"weight {k} has shape {tuple(tensors[k].shape)}, the architecture needs {tuple(v.shape)}")
+        if tensors[k].is_floating_point() and not torch.isfinite(tensors[k]).all():
+            raise InputError(p, f"weight {k} contains NaN or infinite values")
+    model.load_state_dict({k: tensors[k].to(v.dtype) for k, v in own.items()})
+    model.eval()
+    try:
+        stage = int(meta.get("stage", ""))
+        info = json.loads(meta.get("info", "{}"))
+    except ValueError:
+        raise InputError(p, "the checkpoint's stage or info metadata is unreadable") from None
+    return Checkpoint(model, stage, info)

@@ -1,0 +1,138 @@
+"""U-Net decoder: shapes, range, gradients, odd sizes, supersampling, presets, bad input."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from stylize3d_core.errors import InputError
+from stylize3d_core.models.decoder import DecoderConfig, UNetDecoder, pad_to_multiple, supersample_pool
+
+
+def _inputs(b, c, h, w, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    feats = torch.randn(b, c, h, w, generator=g)
+    mask = (torch.rand(b, 1, h, w, generator=g) > 0.2).float()
+    return feats * mask, mask
+
+
+@pytest.fixture(scope="module")
+def lite():
+    torch.manual_seed(0)
+    return UNetDecoder(DecoderConfig.lite(in_channels=16))
+
+
+def test_presets():
+    paper, lite = DecoderConfig.paper(), DecoderConfig.lite()
+    assert (paper.in_channels, paper.width, paper.levels) == (256, 256, 2)
+    assert (lite.in_channels, lite.levels) == (64, 2) and lite.width < paper.width
+    assert DecoderConfig.lite(supersample=True).supersample
+
+
+@pytest.mark.parametrize("config", [DecoderConfig.paper(), DecoderConfig.lite()], ids=["paper", "lite"])
+def test_shapes_and_range_both_presets(config):
+    dec = UNetDecoder(config)
+    feats, mask = _inputs(2, config.in_channels, 24, 32)
+    with torch.inference_mode():
+        rgb = dec(feats, mask)
+    assert rgb.shape == (2, 3, 24, 32) and rgb.is_contiguous()
+    assert torch.isfinite(rgb).all() and 0.0 <= float(rgb.min()) and float(rgb.max()) <= 1.0
+
+
+@pytest.mark.parametrize("h, w", [(37, 53), (1, 1), (5, 130), (31, 32)])
+def test_odd_sizes(lite, h, w):
+    feats, mask = _inputs(1, 16, h, w)
+    rgb = lite(feats, mask)
+    assert rgb.shape == (1, 3, h, w) and torch.isfinite(rgb).all()
+
+
+def test_extreme_inputs_stay_in_range(lite):
+    feats, mask = _inputs(1, 16, 16, 16)
+    with torch.no_grad():
+        rgb = lite(feats * 1e6, mask)
+    assert torch.isfinite(rgb).all() and 0.0 <= float(rgb.min()) and float(rgb.max()) <= 1.0
+
+
+def test_gradients_reach_parameters_and_input(lite):
+    feats, mask = _inputs(1, 16, 20, 20)
+    feats.requires_grad_(True)
+    lite.zero_grad()
+    lite(feats, mask).mean().backward()
+    assert feats.grad is not None and torch.isfinite(feats.grad).all() and feats.grad.abs().sum() > 0
+    for name, p in lite.named_parameters():
+        assert p.grad is not None and p.grad.abs().sum() > 0, name
+
+
+def test_gradcheck_float64_tiny_decoder():
+    torch.manual_seed(1)
+    dec = UNetDecoder(DecoderConfig(in_channels=2, width=8, levels=2, channels_last=False)).double()
+    g = torch.Generator().manual_seed(2)
+    feats = torch.randn(1, 2, 5, 6, dtype=torch.float64, generator=g, requires_grad=True)
+    mask = torch.ones(1, 1, 5, 6, dtype=torch.float64)
+    assert torch.autograd.gradcheck(lambda f: dec(f, mask), (feats,))
+
+
+def test_channels_last_matches_contiguous(lite):
+    other = UNetDecoder(DecoderConfig(in_channels=16, width=lite.config.width, channels_last=False))
+    other.load_state_dict(lite.state_dict())
+    feats, mask = _inputs(1, 16, 24, 20)
+    with torch.inference_mode():
+        torch.testing.assert_close(lite(feats, mask), other(feats, mask), rtol=1e-4, atol=1e-5)
+
+
+def test_batch_items_are_independent(lite):
+    feats, mask = _inputs(2, 16, 16, 24)
+    with torch.inference_mode():
+        both = lite(feats, mask)
+        torch.testing.assert_close(both[1:], lite(feats[1:], mask[1:]), rtol=1e-4, atol=1e-5)
+
+
+def test_padding_does_not_leak_into_the_crop_size(lite):
+    # The decoder pads 18x18 to 20x20 internally; its output must equal that of an
+    # explicitly zero-padded (hole) input, cropped.
+    feats, mask = _inputs(1, 16, 18, 18)
+    with torch.inference_mode():
+        a = lite(feats, mask)
+        b = lite(pad_to_multiple(feats, 4), pad_to_multiple(mask, 4))[..., :18, :18]
+    torch.testing.assert_close(a, b)
+
+
+def test_pad_to_multiple():
+    x = torch.ones(1, 2, 5, 8)
+    y = pad_to_multiple(x, 4)
+    assert y.shape == (1, 2, 8, 8) and float(y[..., 5:, :].abs().sum()) == 0.0
+    assert pad_to_multiple(x[..., :4, :], 4).shape == (1, 2, 4, 8)
+
+
+def test_supersample_pool_known_values():
+    feats = torch.tensor([[[[4.0, 8.0, 1.0, 1.0], [2.0, 6.0, 1.0, 1.0]]]])  # (1, 1, 2, 4)
+    mask = torch.tensor([[[[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]]]])
+    pooled, cover = supersample_pool(feats, mask)
+    torch.testing.assert_close(pooled, torch.tensor([[[[5.0, 0.0]]]]))  # mean of covered 4 and 6; empty block 0
+    torch.testing.assert_close(cover, torch.tensor([[[[0.5, 0.0]]]]))
+    with pytest.raises(InputError, match="even"):
+        supersample_pool(torch.ones(1, 1, 3, 4), torch.ones(1, 1, 3, 4))
+
+
+def test_supersampled_decoder_halves_the_size():
+    torch.manual_seed(0)
+    dec = UNetDecoder(DecoderConfig.lite(in_channels=8, supersample=True))
+    feats, mask = _inputs(1, 8, 2 * 19, 2 * 26)
+    rgb = dec(feats, mask)
+    assert rgb.shape == (1, 3, 19, 26) and torch.isfinite(rgb).all()
+
+
+def test_bad_inputs(lite):
+    feats, mask = _inputs(1, 16, 8, 8)
+    with pytest.raises(InputError, match="features"):
+        lite(feats[:, :8], mask)
+    with pytest.raises(InputError, match="mask"):
+        lite(feats, mask[..., :4])
+    bad = feats.clone()
+    bad[0, 0, 0, 0] = float("nan")
+    with pytest.raises(InputError, match="NaN"):
+        lite(bad, mask)
+    with pytest.raises(InputError, match="width"):
+        DecoderConfig(width=30)
+    with pytest.raises(InputError, match="levels"):
+        DecoderConfig(levels=0)

@@ -1,0 +1,169 @@
+"""Perceptual, AdaAttN content, global style losses and the style distance metric."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+import torch.nn.functional as F
+
+from stylize3d_core.errors import InputError
+from stylize3d_core.models.efficientnet_lite import EfficientNetLiteFeatures
+from stylize3d_core.models.losses import (
+    PerceptualLoss,
+    PerceptualLossConfig,
+    StylizationLoss,
+    StylizationLossConfig,
+    adaattn_content_loss,
+    adaattn_targets,
+    feature_stats,
+    global_style_loss,
+    perceptual_loss,
+    style_distance,
+)
+
+skimage_data = pytest.importorskip("skimage.data")
+
+
+def _photo(name: str, size: int = 64) -> torch.Tensor:
+    x = torch.from_numpy(getattr(skimage_data, name)()).permute(2, 0, 1)[None].float() / 255.0
+    return F.interpolate(x, size=(size, size), mode="bilinear", antialias=True, align_corners=False)
+
+
+@pytest.fixture(scope="module")
+def extractor():
+    return EfficientNetLiteFeatures(stages=(0, 1, 2, 3))
+
+
+def test_feature_stats_known_values():
+    x = torch.tensor([1.0, 3.0, 1.0, 3.0]).view(1, 1, 2, 2)
+    mean, std = feature_stats(x, eps=0.0)
+    assert float(mean) == 2.0 and float(std) == 1.0  # population std
+    _, std = feature_stats(torch.ones(1, 2, 3, 3), eps=1e-4)
+    torch.testing.assert_close(std, torch.full((1, 2), 1e-2))
+
+
+def test_perceptual_zero_for_identical_and_positive_otherwise(extractor):
+    loss = PerceptualLoss(PerceptualLossConfig(stages=(1, 2)), extractor)
+    cat, cup = _photo("chelsea"), _photo("coffee")
+    assert float(loss(cat, cat)) == 0.0
+    assert float(loss(cat, cup)) > 0.0
+    mse = PerceptualLoss(PerceptualLossConfig(kind="mse"), extractor)
+    assert float(mse(cat, cup)) > 0.0
+
+
+def test_perceptual_decreases_in_a_toy_optimisation(extractor):
+    loss_fn = PerceptualLoss(PerceptualLossConfig(stages=(0, 1, 2)), extractor)
+    target = _photo("chelsea", 48)
+    logits = torch.zeros_like(target, requires_grad=True)  # image = sigmoid(logits), starts grey
+    opt = torch.optim.Adam([logits], lr=0.1)
+    losses = []
+    for _ in range(15):
+        opt.zero_grad()
+        loss = loss_fn(torch.sigmoid(logits), target)
+        loss.backward()
+        opt.step()
+        losses.append(float(loss.detach()))
+    assert losses[-1] < 0.6 * losses[0]
+    assert all(torch.isfinite(torch.tensor(losses)))
+
+
+def test_global_style_loss_zero_for_identical_and_decreases(extractor):
+    style = _photo("coffee", 48)
+    style_feats = extractor(style)
+    assert float(global_style_loss(style_feats, style_feats, (1, 2))) == 0.0
+    logits = torch.zeros_like(style, requires_grad=True)
+    opt = torch.optim.Adam([logits], lr=0.1)
+    losses = []
+    for _ in range(15):
+        opt.zero_grad()
+        loss = global_style_loss(extractor(torch.sigmoid(logits)), style_feats, (1, 2))
+        loss.backward()
+        opt.step()
+        losses.append(float(loss.detach()))
+    assert losses[0] > 0 and losses[-1] < 0.6 * losses[0]
+
+
+def test_adaattn_content_loss_zero_at_its_target(extractor):
+    content, style = extractor(_photo("chelsea")), extractor(_photo("coffee"))
+    target = adaattn_targets(content, style, 2)
+    assert target.shape == content[2].shape and not target.requires_grad
+    pred = list(content)
+    pred[2] = target
+    assert float(adaattn_content_loss(pred, content, style, (2,))) == 0.0
+    assert float(adaattn_content_loss(content, content, style, (2,))) > 0.0
+
+
+def test_adaattn_target_of_a_constant_style_is_the_style_value(extractor):
+    content = extractor(_photo("chelsea"))
+    style = [torch.full((1, c.shape[1], 4, 4), 0.7) for c in content]  # zero-variance style maps
+    target = adaattn_targets(content, style, 2, eps=1e-6)
+    torch.testing.assert_close(target, torch.full_like(target, 0.7), atol=1e-2, rtol=0)
+
+
+def test_stylization_loss_terms_and_toy_optimisation(extractor):
+    loss_fn = StylizationLoss(StylizationLossConfig(), extractor)
+    content, style = _photo("chelsea", 48), _photo("coffee", 48)
+    style_maps = extractor(style)
+    logits = torch.logit(content.clamp(0.02, 0.98)).clone().requires_grad_(True)
+    opt = torch.optim.Adam([logits], lr=0.05)
+    totals = []
+    for _ in range(12):
+        opt.zero_grad()
+        terms = loss_fn(torch.sigmoid(logits), content, style_maps)
+        total = terms.content + 0.3 * terms.style
+        total.backward()
+        opt.step()
+        totals.append(float(total.detach()))
+    assert terms.content.dim() == 0 and terms.style.dim() == 0
+    assert totals[0] > 0 and totals[-1] < totals[0]
+
+
+@pytest.mark.parametrize("value", [0.0, 0.5, 1.0])
+def test_losses_finite_for_constant_images(extractor, value):
+    const = torch.full((1, 3, 32, 32), value, requires_grad=True)
+    other = torch.full((1, 3, 32, 32), 1.0 - value)
+    terms = StylizationLoss(StylizationLossConfig(), extractor)(const, other, extractor(other))
+    perc = PerceptualLoss(PerceptualLossConfig(), extractor)(const, other)
+    total = terms.content + terms.style + perc
+    assert torch.isfinite(total)
+    total.backward()
+    assert torch.isfinite(const.grad).all()
+
+
+def test_style_distance(extractor):
+    cat, cup = _photo("chelsea"), _photo("coffee")
+    d_same = style_distance(cat, cat, extractor)
+    assert d_same.shape == (1,) and float(d_same) == 0.0
+    near = style_distance(0.9 * cat + 0.05, cat, extractor)
+    far = style_distance(cup, cat, extractor)
+    assert 0.0 < float(near) < float(far)
+    batch = style_distance(torch.cat([cat, cup]), cat, extractor)  # style broadcast over the batch
+    torch.testing.assert_close(batch, torch.cat([d_same, far]))
+    const = style_distance(torch.full((1, 3, 40, 40), 0.3), torch.full((1, 3, 50, 50), 0.3), extractor)
+    assert torch.isfinite(const).all()
+
+
+def test_style_distance_gradient_is_finite_at_zero(extractor):
+    cat = _photo("chelsea", 32).requires_grad_(True)
+    style_distance(cat, cat.detach(), extractor).sum().backward()
+    assert torch.isfinite(cat.grad).all()
+
+
+def test_style_distance_default_extractor():
+    assert float(style_distance(_photo("coffee", 32), _photo("coffee", 32))) == 0.0
+
+
+def test_bad_inputs(extractor):
+    feats = extractor(_photo("chelsea", 32))
+    with pytest.raises(InputError, match="loss kind"):
+        perceptual_loss(feats, feats, (1,), kind="huber")
+    with pytest.raises(InputError, match="stage"):
+        perceptual_loss(feats, feats, (7,))
+    with pytest.raises(InputError, match="kind"):
+        PerceptualLoss(PerceptualLossConfig(kind="l3"), extractor)  # type: ignore[arg-type]
+    with pytest.raises(InputError, match="target"):
+        PerceptualLoss(PerceptualLossConfig(), extractor)(torch.rand(1, 3, 32, 32), torch.rand(1, 3, 16, 16))
+    with pytest.raises(InputError, match="batch"):
+        style_distance(torch.rand(2, 3, 32, 32), torch.rand(3, 3, 32, 32), extractor)
+    with pytest.raises(InputError, match="features"):
+        global_style_loss(feats, [f[:, :1] for f in feats], (1,))
