@@ -1,0 +1,333 @@
+"""Training of the stylization model from 2D images only (paper Sec. 4; DESIGN.md stage 7).
+
+* **Stage 1 (view synthesis):** encoder + decoder learn to render each
+  sample's target views: L1 + perceptual loss (EfficientNet features) against
+  the target (a pseudo view rendered from the sample's LDI, or a true view of a
+  procedural scene), plus the multi-view consistency loss between the V
+  predicted views.
+* **Stage 2 (stylization):** the encoder is frozen; the stylizer and the decoder
+  learn AdaAttN content + global style losses against a style image from the
+  style bank, plus the consistency loss. A fraction of the steps keep the
+  stage-1 loss at strength 0, so the decoder still renders the original photo
+  when the user sets the strength to 0.
+
+Consistency loss (DESIGN.md): a random subset of the sample's points is
+projected into every predicted view; for every pair of views, the L1 difference
+of the colours sampled at the points visible in both is averaged.
+
+Runs anywhere from one CPU to several GPUs: under ``torchrun`` (WORLD_SIZE > 1)
+every process trains on its own samples and DDP averages the gradients. The run
+folder holds ``model_stage{S}.safetensors`` (weights + config, loadable by
+:func:`~stylize3d_core.models.checkpoint.load_checkpoint`),
+``state_stage{S}.pt`` (optimizer, iteration, RNG; resumes the run) and
+``log_stage{S}.jsonl`` (one line of losses per logged iteration).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Callable, Dict, List, Optional
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from ..checks import check_range
+from ..errors import InputError
+from ..io.atomic import atomic_path
+from ..models.checkpoint import load_checkpoint, save_checkpoint
+from ..models.efficientnet_lite import EfficientNetLiteFeatures
+from ..models.losses import PerceptualLoss, PerceptualLossConfig, StylizationLoss
+from ..models.stylize3d import ConfigName, ModelConfig, SceneGeometry, Stylize3DModel
+from ..points import three_nn
+from ..render.reproject import pairwise_consistency, sample_view
+from .cache import TrainDataset
+from .data import TrainSample
+
+Log = Callable[[str], None]
+
+
+@dataclass(frozen=True)
+class LossWeights:
+    """Weights of the loss terms.
+
+    Attributes:
+        l1: stage 1, L1 between prediction and target (masked). Default 1.
+        perceptual: stage 1, EfficientNet feature L1 (its raw value is ~10x the
+            pixel L1 at the start). Default 0.05.
+        content: stage 2, AdaAttN content (local feature) loss. Default 1 (public code).
+        style: stage 2, global mean/std style loss. Default 3.
+        consistency: both stages, multi-view consistency L1. Default 1.
+    """
+
+    l1: float = 1.0
+    perceptual: float = 0.05
+    content: float = 1.0
+    style: float = 3.0
+    consistency: float = 1.0
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """A training run.
+
+    Attributes:
+        stage: 1 (view synthesis) or 2 (stylization; needs ``init`` or a stage-1 checkpoint in ``out_dir``).
+        model: "lite" or "paper" (see :class:`ModelConfig`).
+        data_dir: training samples written by ``stylize3d prepare-data``.
+        styles_dir: style bank (stage 2) written by ``stylize3d prepare-styles``.
+        out_dir: the run folder (checkpoints, state, logs).
+        iterations: total optimizer steps of the stage (public code: 20k).
+        batch_size: samples per step (public code: 8).
+        lr: Adam learning rate (public code: 1e-4).
+        weights: loss weights.
+        consistency_points: points sampled per sample for the consistency loss.
+        recon_fraction: stage 2, fraction of steps that train strength 0 with the stage-1 loss.
+        checkpoint_every: write checkpoint and state every this many steps (and at the end).
+        log_every: log losses every this many steps.
+        max_hours: stop (after checkpointing) once this much wall time has passed; None = no limit.
+        init: checkpoint to start from (stage 2: the stage-1 model).
+        seed: base seed (sample order, style choice, consistency points).
+        threads: torch CPU threads (None: torch's default).
+    """
+
+    stage: int = 1
+    model: ConfigName = "lite"
+    data_dir: str = "runs/data"
+    styles_dir: str = "runs/styles"
+    out_dir: str = "runs/train"
+    iterations: int = 20000
+    batch_size: int = 8
+    lr: float = 1e-4
+    weights: LossWeights = LossWeights()
+    consistency_points: int = 4096
+    recon_fraction: float = 0.2
+    checkpoint_every: int = 100
+    log_every: int = 10
+    max_hours: Optional[float] = None
+    init: Optional[str] = None
+    seed: int = 0
+    threads: Optional[int] = None
+
+    def __post_init__(self) -> None:
+        if self.stage not in (1, 2):
+            raise InputError("stage", f"must be 1 or 2, got {self.stage!r}")
+        ModelConfig.by_name(self.model)
+        for name in ("iterations", "batch_size", "consistency_points", "checkpoint_every", "log_every"):
+            check_range(getattr(self, name), name, 1, 1e9)
+        check_range(self.lr, "lr", 0.0, 1.0, inclusive=False)
+        check_range(self.recon_fraction, "recon_fraction", 0.0, 1.0)
+        if self.max_hours is not None:
+            check_range(self.max_hours, "max_hours", 0.0, 1e4, inclusive=False)
+
+
+def geometry_from_sample(sample: TrainSample) -> SceneGeometry:
+    """The model's :class:`SceneGeometry` of a cached training sample (every point is encoded)."""
+    xyz = sample.points.xyz.float()
+    with torch.no_grad():
+        up = three_nn(sample.xyz_ndc.float(), sample.hierarchy.xyz[-1])
+    return SceneGeometry(xyz, sample.points.rgb.float(), sample.ndc, torch.arange(xyz.shape[0]), sample.hierarchy, up)
+
+
+def consistency_loss(
+    points: torch.Tensor, views: List[torch.Tensor], zbuffers: List[torch.Tensor], sample: TrainSample
+) -> torch.Tensor:
+    """Mean over view pairs of the L1 colour difference at points visible in both views."""
+    samples = [sample_view(points, v, z, sample.cameras[i]) for i, (v, z) in enumerate(zip(views, zbuffers))]
+    terms = []
+    for a in range(len(samples)):
+        for b in range(a + 1, len(samples)):
+            l1, _, n = pairwise_consistency(samples[a], samples[b])
+            if n > 0:
+                terms.append(l1)
+    return torch.stack(terms).mean() if terms else views[0].sum() * 0.0
+
+
+class TrainStep(nn.Module):
+    """One sample's loss (a module so DDP can wrap it). Runs on the training thread."""
+
+    def __init__(self, model: Stylize3DModel, features: EfficientNetLiteFeatures, weights: LossWeights,
+                 consistency_points: int) -> None:
+        super().__init__()
+        self.model = model
+        self.features = features
+        self.perceptual = PerceptualLoss(PerceptualLossConfig(), extractor=features)
+        self.stylization = StylizationLoss(extractor=features)
+        self.weights = weights
+        self.consistency_points = consistency_points
+
+    def forward(self, sample: TrainSample, style: Optional[torch.Tensor], generator: torch.Generator
+                ) -> Dict[str, torch.Tensor]:
+        geom = geometry_from_sample(sample)
+        content = self.model.encode(geom)  # (M, C)
+        if style is not None:
+            maps = self.features(style.unsqueeze(0))
+            feats = self.model.stylizer.stylize(content, maps)
+        else:
+            maps, feats = None, content
+        dense = self.model.dense_features(feats, geom)  # (N, Cr)
+        H, W = sample.image_size
+        views, zbufs = [], []
+        for v in range(len(sample.cameras)):
+            rgb, frags = self.model.render_view(dense, geom.xyz, sample.cameras[v], H, W)
+            views.append(rgb)
+            zbufs.append(frags.depth)
+        pred = torch.stack(views)  # (V, 3, H, W)
+        target = sample.targets.float()
+        w = self.weights
+        terms: Dict[str, torch.Tensor] = {}
+        if style is None:
+            mask = sample.masks[:, None].float()  # (V, 1, H, W)
+            terms["l1"] = w.l1 * ((pred - target).abs() * mask).sum() / (3 * mask.sum()).clamp(min=1.0)
+            terms["perceptual"] = w.perceptual * self.perceptual(pred, target)
+        else:
+            st = self.stylization(pred, target, maps)
+            terms["content"] = w.content * st.content
+            terms["style"] = w.style * st.style
+        n = geom.xyz.shape[0]
+        pick = torch.randperm(n, generator=generator)[: self.consistency_points]
+        terms["consistency"] = w.consistency * consistency_loss(geom.xyz[pick], views, zbufs, sample)
+        return terms
+
+
+def _load_styles(styles_dir: str) -> List[torch.Tensor]:
+    from ..io.images import load_image
+
+    folder = Path(styles_dir)
+    files = sorted(folder.glob("*.png")) + sorted(folder.glob("*.jpg"))
+    if not files:
+        raise InputError(folder, "no style images (*.png, *.jpg) found; run `stylize3d prepare-styles` first")
+    return [torch.from_numpy(load_image(f, max_size=256).rgb).permute(2, 0, 1).contiguous() for f in files]
+
+
+def _random_style(styles: List[torch.Tensor], rng: np.random.Generator, size: int = 160) -> torch.Tensor:
+    """A random crop of a random style image, resized to ``size`` on the short side, with a random flip."""
+    s = styles[int(rng.integers(len(styles)))]
+    _, h, w = s.shape
+    c = int(rng.integers(min(h, w) // 2, min(h, w) + 1))
+    y, x = int(rng.integers(0, h - c + 1)), int(rng.integers(0, w - c + 1))
+    crop = s[:, y: y + c, x: x + c].unsqueeze(0)
+    crop = F.interpolate(crop, size=(size, size), mode="bilinear", align_corners=False, antialias=True)[0]
+    return crop.flip(-1) if rng.random() < 0.5 else crop
+
+
+def _dist_info():
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    rank = int(os.environ.get("RANK", "0"))
+    local = int(os.environ.get("LOCAL_RANK", "0"))
+    return world, rank, local
+
+
+def train(config: TrainConfig, log: Log = print) -> Path:
+    """Run (or resume) a training stage; returns the checkpoint path."""
+    world, rank, local = _dist_info()
+    if config.threads:
+        torch.set_num_threads(config.threads)
+    device = torch.device(f"cuda:{local}" if torch.cuda.is_available() else "cpu")
+    if world > 1:
+        torch.distributed.init_process_group("nccl" if device.type == "cuda" else "gloo")
+    out = Path(config.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    ckpt_path = out / f"model_stage{config.stage}.safetensors"
+    state_path = out / f"state_stage{config.stage}.pt"
+    log_path = out / f"log_stage{config.stage}.jsonl"
+
+    start_it = 0
+    if ckpt_path.exists() and state_path.exists():
+        model = load_checkpoint(ckpt_path).model
+        state = torch.load(state_path, weights_only=True)
+        start_it = int(state["iteration"])
+        log(f"resuming stage {config.stage} from {ckpt_path} at iteration {start_it}")
+    elif config.init is not None:
+        model = load_checkpoint(config.init).model
+        state = None
+        log(f"starting stage {config.stage} from {config.init}")
+    elif config.stage == 2:
+        stage1 = out / "model_stage1.safetensors"
+        if not stage1.exists():
+            raise InputError("init", "stage 2 needs a stage-1 checkpoint: pass --init or train stage 1 in this folder")
+        model = load_checkpoint(stage1).model
+        state = None
+    else:
+        model = Stylize3DModel(ModelConfig.by_name(config.model))
+        state = None
+    if model.config.name != config.model:
+        raise InputError("model", f"the checkpoint is a {model.config.name!r} model, not {config.model!r}")
+    model.to(device).train()
+
+    if config.stage == 2:
+        model.encoder.requires_grad_(False)
+        model.encoder.eval()
+    else:
+        model.stylizer.requires_grad_(False)  # stage 1 never uses the stylizer
+    features = EfficientNetLiteFeatures(stages=(0, 1, 2, 3, 4)).to(device)
+    step = TrainStep(model, features, config.weights, config.consistency_points).to(device)
+    ddp = torch.nn.parallel.DistributedDataParallel(step, device_ids=[local] if device.type == "cuda" else None) \
+        if world > 1 else step
+    params = [p for p in model.parameters() if p.requires_grad]
+    opt = torch.optim.Adam(params, lr=config.lr)
+    rng = np.random.default_rng(config.seed + 1000 * rank + start_it)
+    gen = torch.Generator().manual_seed(config.seed + rank + start_it)
+    if state is not None:
+        opt.load_state_dict(state["optimizer"])
+
+    data = TrainDataset(config.data_dir)
+    styles = _load_styles(config.styles_dir) if config.stage == 2 else []
+    t_start = time.time()
+    info = {"stage": config.stage, "config": asdict(config), "data": str(config.data_dir), "samples": len(data)}
+
+    def checkpoint(it: int) -> None:
+        if rank != 0:
+            return
+        hours = float(state["hours"] if state is not None else 0.0) + (time.time() - t_start) / 3600
+        save_checkpoint(ckpt_path, model, config.stage, {**info, "iterations": it, "hours": round(hours, 3)})
+        with atomic_path(state_path) as tmp:
+            torch.save({"iteration": it, "optimizer": opt.state_dict(), "hours": hours}, tmp)
+
+    it = start_it
+    window: Dict[str, List[float]] = {}
+    t_log = time.time()
+    while it < config.iterations:
+        opt.zero_grad(set_to_none=True)
+        indices = rng.integers(0, len(data), size=config.batch_size)
+        recon = config.stage == 2 and rng.random() < config.recon_fraction
+        for b, i in enumerate(indices):
+            sample = data[int(i)]
+            style = _random_style(styles, rng).to(device) if config.stage == 2 and not recon else None
+            sync = world > 1 and b < len(indices) - 1
+            ctx = ddp.no_sync() if sync else contextlib.nullcontext()
+            with ctx:
+                terms = ddp(sample, style, gen)
+                loss = sum(terms.values()) / len(indices)
+                if not torch.isfinite(loss):
+                    raise FloatingPointError(f"non-finite loss at iteration {it}: { {k: float(v) for k, v in terms.items()} }")
+                loss.backward()
+            for k, v in terms.items():
+                window.setdefault(k, []).append(float(v.detach()))
+        torch.nn.utils.clip_grad_norm_(params, 1.0)
+        opt.step()
+        it += 1
+        if it % config.log_every == 0 and rank == 0:
+            means = {k: float(np.mean(v)) for k, v in window.items()}
+            sec = (time.time() - t_log) / config.log_every
+            line = {"iteration": it, **means, "total": sum(means.values()), "sec_per_it": round(sec, 3)}
+            with open(log_path, "a", encoding="utf-8") as f:
+                f.write(json.dumps(line) + "\n")
+            log(f"stage {config.stage} it {it}/{config.iterations} " + " ".join(f"{k} {v:.4f}" for k, v in means.items())
+                + f" ({sec:.2f} s/it)")
+            window, t_log = {}, time.time()
+        if it % config.checkpoint_every == 0 or it == config.iterations:
+            checkpoint(it)
+        if config.max_hours is not None and (time.time() - t_start) / 3600 >= config.max_hours:
+            checkpoint(it)
+            log(f"stopping after {config.max_hours} h at iteration {it}; run again to resume")
+            break
+    if world > 1:
+        torch.distributed.destroy_process_group()
+    return ckpt_path
