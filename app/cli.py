@@ -55,11 +55,77 @@ def _add_render(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
 
 
+def _add_training(sub: "argparse._SubParsersAction") -> None:
+    from stylize3d_core.train.trainer import TrainConfig
+
+    d = TrainConfig()
+    p = sub.add_parser("prepare-data", help="generate training samples (pseudo views and procedural scenes)")
+    p.add_argument("--out", default="runs/data", help="dataset root; train/ and eval/ go inside (default runs/data)")
+    p.add_argument("--samples", type=int, default=2500, help="training samples (default 2500)")
+    p.add_argument("--eval-samples", type=int, default=100, help="held-out samples (default 100)")
+    p.add_argument("--size", type=int, default=128, help="sample image size in pixels (default 128)")
+    p.add_argument("--seed", type=int, default=0)
+    p = sub.add_parser("prepare-styles", help="generate the style bank used by stage-2 training")
+    p.add_argument("--out", default=d.styles_dir, help=f"folder (default {d.styles_dir})")
+    p.add_argument("--count", type=int, default=300, help="number of style images (default 300)")
+    p.add_argument("--seed", type=int, default=0)
+    p = sub.add_parser("train", help="train (or resume) stage 1 or 2 of the model",
+                       description="Train the stylization model. Runs resume from the checkpoint in --out. "
+                                   "For several GPUs: torchrun --nproc_per_node=N -m app.cli train ...")
+    p.add_argument("--stage", type=int, choices=(1, 2), required=True)
+    p.add_argument("--config", choices=("lite", "paper"), default=d.model, help=f"model size (default {d.model})")
+    p.add_argument("--data", default=d.data_dir + "/train", help="training samples (default runs/data/train)")
+    p.add_argument("--styles", default=d.styles_dir, help=f"style bank for stage 2 (default {d.styles_dir})")
+    p.add_argument("--out", default=d.out_dir, help=f"run folder (default {d.out_dir})")
+    p.add_argument("--init", default=None, help="checkpoint to start from (stage 2: the stage-1 model)")
+    p.add_argument("--iterations", type=int, default=d.iterations, help=f"total steps (default {d.iterations})")
+    p.add_argument("--batch-size", type=int, default=d.batch_size, help=f"samples per step (default {d.batch_size})")
+    p.add_argument("--lr", type=float, default=d.lr, help=f"Adam learning rate (default {d.lr:g})")
+    p.add_argument("--hours", type=float, default=None, help="stop (with a checkpoint) after this many hours")
+    p.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every)
+    p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
+    p.add_argument("--seed", type=int, default=d.seed)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog=PROG, description="Stylized 3D photos from one photo.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _add_render(sub)
+    _add_training(sub)
     return parser
+
+
+def _prepare_data(args: argparse.Namespace) -> int:
+    from stylize3d_core.train.cache import build_splits
+    from stylize3d_core.train.data import DataConfig
+
+    train, held = build_splits(args.out, args.samples, args.eval_samples, DataConfig(image_size=(args.size, args.size)),
+                               args.seed)
+    for r in (train, held):
+        print(f"{PROG}: {r.root}: {r.generated} generated, {r.skipped} already there, "
+              f"{len(r.regenerated)} regenerated ({r.seconds:.0f} s)", file=sys.stderr)
+    return 0
+
+
+def _prepare_styles(args: argparse.Namespace) -> int:
+    from stylize3d_core.train.styles import build_style_bank
+
+    entries = build_style_bank(args.out, args.count, seed=args.seed)
+    print(f"{PROG}: wrote {len(entries)} style images to {args.out}", file=sys.stderr)
+    return 0
+
+
+def _train(args: argparse.Namespace) -> int:
+    from stylize3d_core.train.trainer import TrainConfig, train
+
+    config = TrainConfig(
+        stage=args.stage, model=args.config, data_dir=args.data, styles_dir=args.styles, out_dir=args.out,
+        iterations=args.iterations, batch_size=args.batch_size, lr=args.lr, checkpoint_every=args.checkpoint_every,
+        max_hours=args.hours, init=args.init, seed=args.seed, threads=args.threads,
+    )
+    path = train(config, log=lambda msg: print(f"{PROG}: {msg}", file=sys.stderr, flush=True))
+    print(f"{PROG}: checkpoint {path}", file=sys.stderr)
+    return 0
 
 
 def _render(args: argparse.Namespace) -> int:
@@ -83,8 +149,9 @@ def main(argv: Optional[List[str]] = None) -> int:
     """Run the command line with ``argv`` (default ``sys.argv[1:]``); return the exit status."""
     args = build_parser().parse_args(argv)
     try:
-        if args.command == "render":
-            return _render(args)
+        handlers = {"render": _render, "prepare-data": _prepare_data, "prepare-styles": _prepare_styles,
+                    "train": _train}
+        return handlers[args.command](args)
     except InputError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
@@ -100,7 +167,6 @@ def main(argv: Optional[List[str]] = None) -> int:
     except Stylize3DError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 1
-    raise AssertionError(f"unhandled command {args.command!r}")  # argparse guarantees a known command
 
 
 def entrypoint() -> None:

@@ -1,0 +1,79 @@
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from stylize3d_core.errors import InputError
+from stylize3d_core.io.images import save_image
+from stylize3d_core.models.checkpoint import load_checkpoint
+from stylize3d_core.train.cache import build_dataset
+from stylize3d_core.train.data import DataConfig
+from stylize3d_core.train.trainer import TrainConfig, train
+
+SMALL = DataConfig(image_size=(32, 40), scene_textures=3, texture_size=32)
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    root = tmp_path_factory.mktemp("data")
+    build_dataset(root / "train", 2, SMALL, seed=1)
+    styles = root / "styles"
+    styles.mkdir()
+    g = np.random.default_rng(0)
+    for i in range(2):
+        save_image(styles / f"s{i}.png", g.random((64, 64, 3)).astype(np.float32))
+    return root
+
+
+def _log(out, stage):
+    return [json.loads(line) for line in (out / f"log_stage{stage}.jsonl").read_text().splitlines()]
+
+
+def test_stage1_reduces_the_loss_and_resumes(data, tmp_path):
+    torch.manual_seed(0)
+    out = tmp_path / "run"
+    cfg = TrainConfig(stage=1, data_dir=str(data / "train"), out_dir=str(out), iterations=40, batch_size=2,
+                      lr=2e-3, log_every=10, checkpoint_every=20, seed=0, threads=1)
+    path = train(cfg, log=lambda _: None)
+    log = _log(out, 1)
+    assert [r["iteration"] for r in log] == [10, 20, 30, 40]
+    assert log[-1]["l1"] < 0.7 * log[0]["l1"]
+    ck = load_checkpoint(path)
+    assert ck.stage == 1 and ck.info["iterations"] == 40
+    # Resuming continues from the saved iteration.
+    messages = []
+    train(TrainConfig(**{**cfg.__dict__, "iterations": 50}), log=messages.append)
+    assert any("resuming" in m and "40" in m for m in messages)
+    assert load_checkpoint(path).info["iterations"] == 50
+
+
+def test_stage2_trains_stylizer_with_frozen_encoder(data, tmp_path):
+    out = tmp_path / "run"
+    s1 = TrainConfig(stage=1, data_dir=str(data / "train"), out_dir=str(out), iterations=2, batch_size=1,
+                     log_every=1, threads=1)
+    train(s1, log=lambda _: None)
+    before = load_checkpoint(out / "model_stage1.safetensors").model
+    s2 = TrainConfig(stage=2, data_dir=str(data / "train"), styles_dir=str(data / "styles"), out_dir=str(out),
+                     iterations=3, batch_size=1, log_every=1, recon_fraction=0.0, threads=1)
+    train(s2, log=lambda _: None)
+    after = load_checkpoint(out / "model_stage2.safetensors").model
+    for (k, a), (_, b) in zip(before.encoder.state_dict().items(), after.encoder.state_dict().items()):
+        assert torch.equal(a, b), f"encoder changed: {k}"
+    changed = [k for (k, a), (_, b) in zip(before.stylizer.state_dict().items(), after.stylizer.state_dict().items())
+               if not torch.equal(a, b)]
+    assert changed
+    log = _log(out, 2)
+    assert {"content", "style", "consistency"} <= set(log[0])
+    assert all(np.isfinite(r["total"]) for r in log)
+
+
+def test_bad_settings(data, tmp_path):
+    with pytest.raises(InputError):
+        TrainConfig(stage=3)
+    with pytest.raises(InputError):
+        TrainConfig(model="huge")
+    with pytest.raises(InputError, match="stage-1"):
+        train(TrainConfig(stage=2, data_dir=str(data / "train"), out_dir=str(tmp_path / "x")), log=lambda _: None)
+    with pytest.raises(InputError):
+        train(TrainConfig(stage=1, data_dir=str(tmp_path / "missing"), out_dir=str(tmp_path / "y")), log=lambda _: None)
