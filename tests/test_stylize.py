@@ -1,0 +1,60 @@
+import numpy as np
+import pytest
+import torch
+
+from stylize3d_core.depth.types import DepthMap
+from stylize3d_core.errors import InputError
+from stylize3d_core.geometry.camera import Cameras
+from stylize3d_core.models.checkpoint import save_checkpoint
+from stylize3d_core.models.stylize3d import ModelConfig, Stylize3DModel
+from stylize3d_core.scene.photo3d import Photo3D
+from stylize3d_core.stylize import Stylized3DPhoto, StylizeSettings
+
+
+@pytest.fixture(scope="module")
+def stylized(tmp_path_factory):
+    torch.manual_seed(0)
+    path = save_checkpoint(tmp_path_factory.mktemp("m") / "m.safetensors", Stylize3DModel(ModelConfig.lite()), 2, {})
+    g = np.random.default_rng(0)
+    rgb = g.random((48, 64, 3), dtype=np.float32)
+    depth = np.ones((48, 64), np.float32)
+    depth[12:36, 16:48] = 0.5
+    p = Photo3D.build(rgb, DepthMap(depth, np.ones_like(depth, bool), "metric", "test"))
+    return Stylized3DPhoto(p, path, StylizeSettings(strength=1.0))
+
+
+def test_render_full_and_preview(stylized):
+    cam = Cameras.identity(stylized.photo.fov_y_deg)
+    full = stylized.render(cam, 48, 64)
+    prev = stylized.render(cam, 24, 32, preview=True)
+    assert full.shape == (48, 64, 3) and prev.shape == (24, 32, 3)
+    assert np.isfinite(full).all() and full.min() >= 0 and full.max() <= 1
+
+
+def test_style_and_strength_change_the_frame(stylized):
+    cam = Cameras.identity(stylized.photo.fov_y_deg)
+    stylized.set_style(None)
+    base = stylized.render(cam, 48, 64)
+    g = np.random.default_rng(1)
+    stylized.set_style(g.random((64, 64, 3), dtype=np.float32))
+    styled = stylized.render(cam, 48, 64)
+    assert stylized.has_style and not np.allclose(base, styled)
+    stylized.set_strength(0.0)
+    assert np.allclose(stylized.render(cam, 48, 64), base, atol=1e-6)
+    stylized.set_strength(1.0)
+    assert np.allclose(stylized.render(cam, 48, 64), styled, atol=1e-6)
+    # A constant-colour style (zero variance) stays finite.
+    stylized.set_style(np.full((32, 32, 3), 0.3, np.float32))
+    assert np.isfinite(stylized.render(cam, 48, 64)).all()
+
+
+def test_frames_and_bad_input(stylized):
+    cams = Cameras.create(np.stack([np.eye(4)] * 2), stylized.photo.fov_y_deg)
+    frames = list(stylized.frames(cams, 24, 32))
+    assert len(frames) == 2 and np.allclose(frames[0], frames[1])
+    with pytest.raises(InputError):
+        stylized.set_strength(2.0)
+    with pytest.raises(InputError):
+        stylized.set_style(np.full((8, 8, 3), np.nan, np.float32))
+    with pytest.raises(InputError):
+        StylizeSettings(supersample=3)
