@@ -26,10 +26,16 @@ def _add_render(sub: "argparse._SubParsersAction") -> None:
     p = sub.add_parser(
         "render",
         help="render a 3D photo along a camera path into a video",
-        description="Turn PHOTO into a 3D photo and render it along a camera path "
-        "(currently the plain, unstylized 3D photo).",
+        description="Turn PHOTO into a 3D photo and render it along a camera path, "
+        "painted in the style of --style (or plain without it).",
     )
     p.add_argument("photo", help="the photo: JPEG, PNG, WebP or TIFF")
+    p.add_argument("--style", default=None, metavar="IMAGE",
+                   help="style image (a painting, a texture); without it the plain 3D photo is rendered")
+    p.add_argument("--strength", type=float, default=d.strength,
+                   help=f"style strength from 0 (photo) to 1 (default {d.strength:g})")
+    p.add_argument("--model", default=d.model, metavar="CHECKPOINT",
+                   help="stylization model (default: the shipped assets/model/stylize3d_lite.safetensors)")
     p.add_argument("-o", "--output", default=d.output,
                    help=f"video to write: .mp4, .gif, or a folder (ending in /) for PNG frames (default {d.output})")
     p.add_argument("--depth", default=d.depth, metavar="SPEC",
@@ -83,6 +89,7 @@ def _add_training(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--lr", type=float, default=d.lr, help=f"Adam learning rate (default {d.lr:g})")
     p.add_argument("--hours", type=float, default=None, help="stop (with a checkpoint) after this many hours")
     p.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every)
+    p.add_argument("--log-every", type=int, default=d.log_every)
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     p.add_argument("--seed", type=int, default=d.seed)
 
@@ -121,6 +128,7 @@ def _train(args: argparse.Namespace) -> int:
     config = TrainConfig(
         stage=args.stage, model=args.config, data_dir=args.data, styles_dir=args.styles, out_dir=args.out,
         iterations=args.iterations, batch_size=args.batch_size, lr=args.lr, checkpoint_every=args.checkpoint_every,
+        log_every=args.log_every,
         max_hours=args.hours, init=args.init, seed=args.seed, threads=args.threads,
     )
     path = train(config, log=lambda msg: print(f"{PROG}: {msg}", file=sys.stderr, flush=True))
@@ -133,7 +141,8 @@ def _render(args: argparse.Namespace) -> int:
         photo=args.photo, output=args.output, depth=args.depth, trajectory=args.trajectory,
         frames=args.frames, fps=args.fps, size=args.size, max_size=args.max_size, fov=args.fov,
         supersample=args.supersample, camera_path=args.camera_path,
-        save_camera_path=args.save_camera_path, save_ply=args.save_ply,
+        save_camera_path=args.save_camera_path, save_ply=args.save_ply, style=args.style,
+        strength=args.strength, model=args.model,
     )
     log = (lambda _msg: None) if args.quiet else (lambda msg: print(f"{PROG}: {msg}", file=sys.stderr))
     progress = None if args.quiet else console_progress("render")

@@ -24,6 +24,9 @@ from .scene.photo3d import Photo3D, Photo3DSettings
 
 Log = Callable[[str], None]
 
+DEFAULT_MODEL = str(Path(__file__).resolve().parents[1] / "assets" / "model" / "stylize3d_lite.safetensors")
+"""The trained lite checkpoint shipped with the repository (see assets/model/README.md)."""
+
 
 def _quiet(_: str) -> None:
     return None
@@ -50,6 +53,10 @@ class RenderJob:
         camera_path: a camera-path JSON to follow instead of ``trajectory``/``frames``.
         save_camera_path: also write the cameras used to this JSON file.
         save_ply: also write the coloured point cloud to this PLY file.
+        style: a style image; None (default) renders the plain, unstylized 3D photo.
+        strength: style strength in [0, 1]. Default 0.8.
+        model: the model checkpoint used with ``style``. Default: the shipped lite model.
+        ldi: layered-depth-image settings.
     """
 
     photo: str
@@ -65,6 +72,9 @@ class RenderJob:
     camera_path: Optional[str] = None
     save_camera_path: Optional[str] = None
     save_ply: Optional[str] = None
+    style: Optional[str] = None
+    strength: float = 0.8
+    model: str = DEFAULT_MODEL
     ldi: LDISettings = field(default_factory=LDISettings)
 
 
@@ -113,10 +123,34 @@ def job_cameras(job: RenderJob, fov_y_deg: float) -> Tuple[Cameras, float]:
     return make_trajectory(settings), float(job.fps)
 
 
+def _check_style_inputs(job: RenderJob):
+    """Fail fast, before the photo is processed: the style image, the strength and the model file."""
+    from .stylize import StylizeSettings
+
+    settings = StylizeSettings(strength=job.strength, supersample=job.supersample)
+    style = load_image(job.style, max_size=1024).rgb
+    if not Path(job.model).exists():
+        raise InputError(job.model, "model checkpoint not found (train one with `stylize3d train`, or pass --model)")
+    return settings, style
+
+
+def _stylized(p3d: Photo3D, job: RenderJob, settings, style, timings: Dict[str, float], log: Log):
+    from .models.checkpoint import load_checkpoint
+    from .stylize import Stylized3DPhoto
+
+    t0 = time.perf_counter()
+    stylized = Stylized3DPhoto(p3d, load_checkpoint(job.model), settings)
+    stylized.set_style(style)
+    timings["model"] = time.perf_counter() - t0
+    log(f"style {job.style} at strength {job.strength:g} with {job.model}")
+    return stylized
+
+
 def run_render(job: RenderJob, *, progress: Optional[Progress] = None, log: Log = _quiet) -> RenderResult:
     """Run a :class:`RenderJob`: build the 3D photo, render every frame, write the video."""
     if job.supersample not in (1, 2):
         raise InputError("supersample", f"must be 1 or 2, got {job.supersample!r}")
+    style_inputs = _check_style_inputs(job) if job.style is not None else None
     p3d = load_photo3d(job.photo, job.depth, max_size=job.max_size, fov=job.fov, ldi=job.ldi, log=log)
     timings = dict(p3d.timings)
     cameras, fps = job_cameras(job, p3d.fov_y_deg)
@@ -128,9 +162,12 @@ def run_render(job: RenderJob, *, progress: Optional[Progress] = None, log: Log 
     if job.save_camera_path is not None:
         save_camera_path(job.save_camera_path, cameras, fps=fps, image_size=(H, W))
         log(f"wrote {job.save_camera_path}")
-    renderer = PlainRenderer(p3d.points, PlainRenderSettings(supersample=job.supersample))
+    if job.style is None:
+        frames = PlainRenderer(p3d.points, PlainRenderSettings(supersample=job.supersample)).frames(cameras, H, W)
+    else:
+        frames = _stylized(p3d, job, *style_inputs, timings, log).frames(cameras, H, W)
     t0 = time.perf_counter()
-    out = write_video(job.output, renderer.frames(cameras, H, W), fps=fps, n_frames=len(cameras), progress=progress)
+    out = write_video(job.output, frames, fps=fps, n_frames=len(cameras), progress=progress)
     timings["render+encode"] = time.perf_counter() - t0
     log(f"wrote {out}: {len(cameras)} frames of {W}x{H}")
     return RenderResult(Path(out), len(cameras), (H, W), len(p3d.points), timings)
