@@ -1,0 +1,99 @@
+"""``stylize3d-viewer``: the interactive desktop viewer (Open3D GUI).
+
+    stylize3d-viewer [PHOTO] [--style STYLE] [--depth SPEC] [--model CHECKPOINT | --no-model]
+                     [--max-size 640] [--fov DEG] [--strength 0.8] [--threads 1] [--size 1280x800]
+                     [--test-script steps.json --test-report report.json]
+
+Modules: :mod:`.orbit` (camera math), :mod:`.state` (view state, scheduling),
+:mod:`.worker` (the compute thread), :mod:`.session` (3D photo, model, renders,
+export), :mod:`.panel` and :mod:`.window` (widgets and callbacks, main thread),
+:mod:`.script` (test hooks). Only the last three import Open3D's GUI, and only
+when the viewer starts, so the rest can be imported and tested headless.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import List, Optional
+
+from .session import DEFAULT_MODEL
+
+PROG = "stylize3d-viewer"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog=PROG,
+        description="Browse a stylized 3D photo: drag to orbit (right/shift-drag pans, wheel moves "
+                    "forwards), change the style and its strength, export videos.")
+    p.add_argument("photo", nargs="?", default=None, help="photo to open (JPEG, PNG, WebP, TIFF)")
+    p.add_argument("--style", default=None, help="style image to apply")
+    p.add_argument("--depth", default="auto", metavar="SPEC",
+                   help="depth source: auto (default), prior, phone, a depth file (append :disparity for "
+                        "disparity), onnx:MODEL.onnx, stereo:RIGHT_IMAGE, stereo:sbs")
+    models = p.add_mutually_exclusive_group()
+    models.add_argument("--model", default=None, metavar="CHECKPOINT",
+                        help=f"model checkpoint (.safetensors); default {DEFAULT_MODEL.relative_to(DEFAULT_MODEL.parents[2])} "
+                             "when it exists, else the plain 3D photo is shown")
+    models.add_argument("--no-model", action="store_true",
+                        help="show the plain 3D photo even if a model is available")
+    p.add_argument("--max-size", type=int, default=640, help="shrink the photo to this long side (default 640)")
+    p.add_argument("--fov", type=float, default=None, help="vertical FOV of the photo in degrees (default: EXIF, else 60)")
+    p.add_argument("--strength", type=float, default=0.8, help="style strength in [0, 1] (default 0.8)")
+    p.add_argument("--threads", type=int, default=1,
+                   help="torch threads of the compute worker (default 1: on a 2-core machine the other core "
+                        "draws the window; more threads only help on an otherwise idle machine with more cores)")
+    p.add_argument("--size", default="1280x800", metavar="WxH", help="window size in pixels (default 1280x800)")
+    p.add_argument("--test-script", default=None, metavar="JSON", help="run these test steps (see app/viewer/script.py)")
+    p.add_argument("--test-report", default=None, metavar="JSON", help="where the test script writes its report")
+    return p
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    """Run the viewer until its window closes; returns the exit status (1 if a test script failed)."""
+    args = build_parser().parse_args(argv)
+    try:
+        width, height = (int(v) for v in args.size.lower().split("x"))
+    except ValueError:
+        print(f"{PROG}: --size must look like 1280x800, got {args.size!r}", file=sys.stderr)
+        return 2
+    if not 0.0 <= args.strength <= 1.0:
+        print(f"{PROG}: --strength must be in [0, 1], got {args.strength}", file=sys.stderr)
+        return 2
+    if args.threads < 1:
+        print(f"{PROG}: --threads must be >= 1, got {args.threads}", file=sys.stderr)
+        return 2
+    import open3d.visualization.gui as gui
+    import torch
+
+    torch.set_num_threads(args.threads)
+
+    from .script import ScriptRunner, read_script
+    from .window import ViewerOptions, ViewerWindow
+
+    steps = read_script(args.test_script) if args.test_script else None
+    app = gui.Application.instance
+    app.initialize()
+    viewer = ViewerWindow(ViewerOptions(
+        photo=args.photo, style=args.style, depth=args.depth, model=args.model, use_model=not args.no_model,
+        max_size=args.max_size,
+        fov=args.fov, strength=args.strength, width=width, height=height))
+    runner = None
+    if steps is not None:
+        runner = ScriptRunner(viewer, steps, args.test_report or "viewer-test-report.json")
+        runner.start()
+    app.run()
+    viewer.worker.stop(timeout=10.0)
+    if runner is not None:
+        runner.thread.join(timeout=10.0)
+        return 0 if runner.ok else 1
+    return 0
+
+
+def entrypoint() -> None:
+    """Console-script entry point (``stylize3d-viewer``)."""
+    sys.exit(main())
+
+
+__all__ = ["entrypoint", "main", "build_parser"]

@@ -1,0 +1,227 @@
+"""The viewer's widgets: side panel, status area, help overlay and menus (construction only).
+
+:class:`Panel` builds the widgets and keeps references to them; the window
+(:mod:`app.viewer.window`) connects their callbacks. Sizes are in em units (the
+theme's font size), so the layout follows the UI scale.
+"""
+
+from __future__ import annotations
+
+from typing import List, Tuple, get_args
+
+import open3d.visualization.gui as gui
+
+from stylize3d_core.geometry.trajectories import TrajectoryName
+
+from .state import ExportSettings, ViewState
+
+DEPTH_CHOICES: Tuple[Tuple[str, str], ...] = (
+    ("auto", "auto (phone depth, else built-in prior)"),
+    ("prior", "built-in prior"),
+    ("phone", "phone depth (XMP)"),
+    ("stereo:sbs", "side-by-side stereo card"),
+)
+"""Depth sources offered in the picker: (spec, label). A depth file is chosen with "Depth file..."."""
+
+EXPORT_FORMATS: Tuple[Tuple[str, str], ...] = (("mp4", "MP4 video"), ("gif", "GIF animation"), ("png", "PNG frames"))
+
+SHORTCUTS: Tuple[Tuple[str, str], ...] = (
+    ("left-drag", "orbit about the scene centre"),
+    ("right-drag / shift-drag", "pan"),
+    ("wheel, + / -, PgUp / PgDn", "move forwards / backwards"),
+    ("double-click, R", "reset the view"),
+    ("arrow keys", "orbit in 1-degree steps"),
+    ("O / S / D", "open photo / style / depth file"),
+    ("M", "open the bundled sample"),
+    ("T", "stylized / original"),
+    ("[ / ]", "strength -0.1 / +0.1"),
+    ("C", "preview the camera path"),
+    ("E", "export a video"),
+    ("P", "save a screenshot"),
+    ("H or F1", "show / hide this help"),
+    ("Esc", "cancel the export, hide the help"),
+    ("", "(letter keys act after a click in the view)"),
+)
+
+MENU_OPEN, MENU_STYLE, MENU_DEPTH, MENU_SAMPLE = 1, 2, 3, 4
+MENU_LOAD_PATH, MENU_SAVE_PATH, MENU_EXPORT, MENU_SCREENSHOT, MENU_QUIT = 5, 6, 7, 8, 9
+MENU_STYLIZED, MENU_RESET, MENU_PREVIEW, MENU_HELP, MENU_ABOUT = 10, 11, 12, 13, 14
+
+
+def build_menubar() -> gui.Menu:
+    """The application's menu bar (File, View, Help)."""
+    file_menu = gui.Menu()
+    file_menu.add_item("Open photo...   O", MENU_OPEN)
+    file_menu.add_item("Open style...   S", MENU_STYLE)
+    file_menu.add_item("Open depth file...   D", MENU_DEPTH)
+    file_menu.add_item("Open bundled sample   M", MENU_SAMPLE)
+    file_menu.add_separator()
+    file_menu.add_item("Load camera path...", MENU_LOAD_PATH)
+    file_menu.add_item("Save camera path...", MENU_SAVE_PATH)
+    file_menu.add_separator()
+    file_menu.add_item("Export video...   E", MENU_EXPORT)
+    file_menu.add_item("Save screenshot...   P", MENU_SCREENSHOT)
+    file_menu.add_separator()
+    file_menu.add_item("Quit", MENU_QUIT)
+    view_menu = gui.Menu()
+    view_menu.add_item("Stylized   T", MENU_STYLIZED)
+    view_menu.set_checked(MENU_STYLIZED, True)
+    view_menu.add_item("Reset view   R", MENU_RESET)
+    view_menu.add_item("Preview camera path   C", MENU_PREVIEW)
+    help_menu = gui.Menu()
+    help_menu.add_item("Keyboard shortcuts   H", MENU_HELP)
+    help_menu.add_item("About", MENU_ABOUT)
+    bar = gui.Menu()
+    bar.add_menu("File", file_menu)
+    bar.add_menu("View", view_menu)
+    bar.add_menu("Help", help_menu)
+    return bar
+
+
+def _row(em: float, *widgets: gui.Widget) -> gui.Horiz:
+    h = gui.Horiz(0.5 * em)
+    for w in widgets:
+        h.add_child(w)
+    return h
+
+
+def _number(kind, value: float, lo: float, hi: float, decimals: int = 3) -> gui.NumberEdit:
+    n = gui.NumberEdit(kind)
+    n.set_limits(lo, hi)
+    if kind == gui.NumberEdit.DOUBLE:
+        n.decimal_precision = decimals
+        n.double_value = float(value)
+    else:
+        n.int_value = int(value)
+    return n
+
+
+class Panel:
+    """The side panel, status area and help overlay of the viewer window.
+
+    Thread use: built and touched on the GUI main thread only.
+    """
+
+    WIDTH_EM = 21.0
+    STATUS_EM = 9.0
+
+    def __init__(self, em: float, state: ViewState) -> None:
+        self.em = em
+        m = gui.Margins(int(0.75 * em), int(0.5 * em), int(0.75 * em), int(0.5 * em))
+        self.root = gui.ScrollableVert(0.4 * em, m)
+
+        # Photo, depth, style.
+        photo = gui.CollapsableVert("Photo and style", 0.3 * em, gui.Margins(int(0.5 * em), 0, 0, 0))
+        self.open_photo = gui.Button("Open photo...")
+        self.sample = gui.Button("Sample")
+        self.sample.tooltip = "open the bundled sample photo and style"
+        photo.add_child(_row(em, self.open_photo, self.sample))
+        self.photo_label = gui.Label("no photo")
+        photo.add_child(self.photo_label)
+        self.depth = gui.Combobox()
+        for _, label in DEPTH_CHOICES:
+            self.depth.add_item(label)
+        self.depth_file = gui.Button("Depth file...")
+        photo.add_child(gui.Label("Depth"))
+        photo.add_child(self.depth)
+        photo.add_child(self.depth_file)
+        self.open_style = gui.Button("Open style...")
+        photo.add_child(self.open_style)
+        self.style_label = gui.Label("no style")
+        photo.add_child(self.style_label)
+        self.root.add_child(photo)
+
+        # Look: stylized / original, strength, FOV, reset.
+        look = gui.CollapsableVert("View", 0.3 * em, gui.Margins(int(0.5 * em), 0, 0, 0))
+        self.stylized = gui.ToggleSwitch("Stylized (T)")
+        self.stylized.is_on = state.stylized
+        look.add_child(self.stylized)
+        look.add_child(gui.Label("Style strength"))
+        self.strength = gui.Slider(gui.Slider.DOUBLE)
+        self.strength.set_limits(0.0, 1.0)
+        self.strength.double_value = state.strength
+        look.add_child(self.strength)
+        look.add_child(gui.Label("Field of view (degrees)"))
+        self.fov = gui.Slider(gui.Slider.DOUBLE)
+        self.fov.set_limits(30.0, 90.0)
+        self.fov.double_value = 60.0
+        look.add_child(self.fov)
+        self.reset = gui.Button("Reset view (R)")
+        look.add_child(self.reset)
+        self.root.add_child(look)
+
+        # Camera path: trajectory and its parameters, preview, load / save.
+        path = gui.CollapsableVert("Camera path", 0.3 * em, gui.Margins(int(0.5 * em), 0, 0, 0))
+        self.trajectory = gui.Combobox()
+        self.trajectory_names: List[str] = list(get_args(TrajectoryName))
+        for name in self.trajectory_names:
+            self.trajectory.add_item(name)
+        self.trajectory.selected_index = self.trajectory_names.index(state.trajectory.name)
+        path.add_child(self.trajectory)
+        grid = gui.VGrid(2, 0.3 * em)
+        t = state.trajectory
+        self.amp_x = _number(gui.NumberEdit.DOUBLE, float(t.x) if isinstance(t.x, (int, float)) else 0.02, 0.0, 0.1)
+        self.amp_y = _number(gui.NumberEdit.DOUBLE, float(t.y) if isinstance(t.y, (int, float)) else 0.02, 0.0, 0.1)
+        self.forward = _number(gui.NumberEdit.DOUBLE, float(t.z[1]) if isinstance(t.z, tuple) else 0.05, -0.1, 0.15)
+        for label, w in (("sideways", self.amp_x), ("vertical", self.amp_y), ("forward", self.forward)):
+            grid.add_child(gui.Label(label))
+            grid.add_child(w)
+        path.add_child(grid)
+        self.preview_path = gui.Button("Preview (C)")
+        path.add_child(self.preview_path)
+        self.load_path = gui.Button("Load...")
+        self.save_path = gui.Button("Save...")
+        path.add_child(_row(em, self.load_path, self.save_path))
+        self.root.add_child(path)
+
+        # Export.
+        export = gui.CollapsableVert("Export", 0.3 * em, gui.Margins(int(0.5 * em), 0, 0, 0))
+        self.format = gui.Combobox()
+        for _, label in EXPORT_FORMATS:
+            self.format.add_item(label)
+        export.add_child(self.format)
+        e: ExportSettings = state.export
+        grid = gui.VGrid(2, 0.3 * em)
+        self.size = _number(gui.NumberEdit.INT, e.size, 16, 4096)
+        self.frames = _number(gui.NumberEdit.INT, e.frames, 1, 10000)
+        self.fps = _number(gui.NumberEdit.DOUBLE, e.fps, 1.0, 240.0, decimals=1)
+        for label, w in (("size (long side)", self.size), ("frames", self.frames), ("fps", self.fps)):
+            grid.add_child(gui.Label(label))
+            grid.add_child(w)
+        export.add_child(grid)
+        self.export = gui.Button("Export... (E)")
+        self.screenshot = gui.Button("Screenshot (P)")
+        export.add_child(_row(em, self.export, self.screenshot))
+        self.root.add_child(export)
+
+        # Status area: messages, progress, Cancel (always visible, below the scrolling panel).
+        self.status_box = gui.Vert(0.3 * em, m)
+        self.status = gui.Label("Open a photo (O) or the bundled sample (M).")
+        self.model_label = gui.Label("")
+        self.fps_label = gui.Label("")
+        self.progress = gui.ProgressBar()
+        self.progress.value = 0.0
+        self.cancel = gui.Button("Cancel")
+        self.cancel.enabled = False
+        self.status_box.add_child(self.status)
+        self.status_box.add_child(self.model_label)
+        self.status_box.add_child(self.fps_label)
+        self.status_box.add_child(self.progress)
+        self.status_box.add_child(self.cancel)
+
+        # Help overlay, drawn over the view.
+        self.help = gui.Vert(0.2 * em, gui.Margins(int(em), int(em), int(em), int(em)))
+        self.help.background_color = gui.Color(0.08, 0.08, 0.1, 0.88)
+        self.help.add_child(gui.Label("Keyboard and mouse  (H to close)"))
+        grid = gui.VGrid(2, 0.3 * em)
+        for key, what in SHORTCUTS:
+            grid.add_child(gui.Label(key))
+            grid.add_child(gui.Label(what))
+        self.help.add_child(grid)
+        self.help.visible = False
+
+    def set_enabled(self, photo_loaded: bool) -> None:
+        """Enable the controls that need a photo."""
+        for w in (self.stylized, self.strength, self.fov, self.reset, self.preview_path,
+                  self.save_path, self.load_path, self.export, self.screenshot):
+            w.enabled = photo_loaded

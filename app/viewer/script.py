@@ -1,0 +1,310 @@
+"""Test hooks: run a JSON script of viewer actions, step by step, and write a report.
+
+``stylize3d-viewer --test-script steps.json --test-report report.json`` reads a
+list of steps such as::
+
+    [{"op": "load_sample"},
+     {"op": "wait_idle", "timeout": 120},
+     {"op": "screenshot", "path": "before.png"},
+     {"op": "grab_window", "path": "window.png"},
+     {"op": "orbit", "dx": 150, "dy": 40, "steps": 30, "interval": 0.03},
+     {"op": "wait_idle"},
+     {"op": "quit"}]
+
+and runs them on its own thread: each step acts on the window through
+``post_to_main_thread`` (:meth:`ViewerWindow.call_on_main`) exactly as the
+widgets' callbacks do, then waits. The report (rewritten after every step)
+lists each step's outcome, the error dialogs shown and the frame statistics.
+A failing step ends the script and closes the window with exit status 1.
+
+Ops: ``open_photo`` (path, depth), ``open_style`` (path), ``load_sample``,
+``wait_idle`` (timeout), ``sleep`` (seconds), ``orbit`` (dx, dy, steps,
+interval, mode "orbit"/"pan"), ``wheel`` (ticks), ``reset_view``, ``preview_path``,
+``set_strength`` (value), ``set_stylized`` (value), ``set_export`` (format,
+size, frames, fps), ``export`` (path, wait, timeout), ``wait_export``, ``cancel_export``, ``ping``,
+``screenshot`` (path), ``grab_window`` (path: the X screen cropped to the
+window, needs Pillow with XCB), ``save_camera_path`` / ``load_camera_path``
+(path), ``help`` (visible), ``expect_error`` (contains), ``state`` (records the
+view state), ``quit``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import threading
+import time
+import traceback
+from dataclasses import asdict, replace
+from pathlib import Path
+from typing import Any, Callable, Dict, List
+
+from stylize3d_core.errors import InputError
+
+from .state import ExportSettings
+from .window import ViewerWindow
+
+
+def run_viewer_process(argv: List[str], display: str) -> None:
+    """Entry point of a ``multiprocessing`` "spawn" child that runs the viewer on X display ``display``.
+
+    The child exits with the viewer's status (0, or 1 when a test script failed);
+    a crash shows as a negative exit code in the parent.
+    """
+    import sys
+
+    os.environ["DISPLAY"] = display
+    from . import main
+
+    sys.exit(main(argv))
+
+
+def read_script(path: str) -> List[Dict[str, Any]]:
+    """The steps of a test script (a JSON list of objects with an "op")."""
+    try:
+        steps = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError) as e:
+        raise InputError(path, f"cannot read the test script: {e}") from e
+    if not isinstance(steps, list) or not all(isinstance(s, dict) and "op" in s for s in steps):
+        raise InputError(path, "a test script is a JSON list of objects, each with an \"op\"")
+    return steps
+
+
+class ScriptRunner:
+    """Runs test-script steps against a :class:`ViewerWindow`.
+
+    Thread use: its own thread; it touches the window only through
+    :meth:`ViewerWindow.call_on_main` (post_to_main_thread).
+    """
+
+    def __init__(self, window: ViewerWindow, steps: List[Dict[str, Any]], report: str) -> None:
+        self.window = window
+        self.steps = steps
+        self.report_path = report
+        self.results: List[Dict[str, Any]] = []
+        self.ok = True
+        self.thread = threading.Thread(target=self._run, name="stylize3d-test-script", daemon=True)
+
+    def start(self) -> None:
+        self.window.script_thread = self.thread
+        self.thread.start()
+
+    # -- plumbing ----------------------------------------------------------------------
+    def main(self, fn: Callable[[], Any], timeout: float = 60.0) -> Any:
+        return self.window.call_on_main(fn, timeout)
+
+    def _write_report(self) -> None:
+        w = self.window
+        stats = self.main(lambda: json.loads(json.dumps(w.stats, default=str))) if not w._closing else {}
+        doc = {"ok": self.ok, "steps": self.results, "errors": list(w.errors), "stats": stats}
+        tmp = self.report_path + ".tmp"
+        Path(tmp).write_text(json.dumps(doc, indent=1, default=str), encoding="utf-8")
+        os.replace(tmp, self.report_path)
+
+    def _run(self) -> None:
+        for step in self.steps:
+            op = step["op"]
+            t0 = time.perf_counter()
+            entry: Dict[str, Any] = {"op": op}
+            try:
+                if op == "quit":
+                    entry.update(ok=True, seconds=0.0)
+                    self.results.append(entry)
+                    self._write_report()
+                    self.main(self.window.request_close)
+                    return
+                handler = getattr(self, "op_" + op, None)
+                if handler is None:
+                    raise InputError("test script", f"unknown op {op!r}")
+                entry["result"] = handler(**{k: v for k, v in step.items() if k != "op"})
+                entry["ok"] = True
+            except Exception as e:  # recorded in the report; the script stops and the app exits with 1
+                entry.update(ok=False, error=f"{type(e).__name__}: {e}", trace=traceback.format_exc())
+                self.ok = False
+            entry["seconds"] = round(time.perf_counter() - t0, 3)
+            self.results.append(entry)
+            if self.window._closing:
+                return
+            self._write_report()
+            if not self.ok:
+                self.main(self.window.request_close)
+                return
+        self._write_report()
+
+    # -- ops ------------------------------------------------------------------------------
+    def op_open_photo(self, path: str, depth: str = None) -> None:
+        self.main(lambda: self.window.open_photo(path, depth))
+
+    def op_open_style(self, path: str) -> None:
+        self.main(lambda: self.window.open_style(path))
+
+    def op_load_sample(self) -> None:
+        self.main(self.window.load_sample)
+
+    def op_sleep(self, seconds: float) -> None:
+        time.sleep(float(seconds))
+
+    def op_wait_idle(self, timeout: float = 120.0) -> Dict[str, Any]:
+        """Wait until the full frame of the current view is on screen and the worker is idle.
+
+        Polls by reading the window's flags from this thread (no post, so no
+        redraw per poll that would compete with the render being waited for),
+        then confirms once on the main thread.
+        """
+        t_end = time.monotonic() + float(timeout)
+        while time.monotonic() < t_end:
+            if self.window.is_settled() and self.main(self.window.is_settled):
+                time.sleep(0.3)  # let Open3D draw the new image before anyone looks at the screen
+                return {"shown": self.main(self._shown_info)}
+            time.sleep(0.05)
+        raise TimeoutError(f"the view did not settle within {timeout:g} s")
+
+    def _shown_info(self) -> Dict[str, Any]:
+        f = self.window._shown
+        return {} if f is None else {"stylized": f.stylized, "preview": f.preview, "size": list(f.rendered_size)}
+
+    def op_orbit(self, dx: float = 0.0, dy: float = 0.0, steps: int = 20, interval: float = 0.02,
+                 mode: str = "orbit") -> Dict[str, Any]:
+        """Drag by (dx, dy) pixels as ``steps`` mouse moves ``interval`` s apart; report the preview rate.
+
+        The moves are posted without waiting for each other, like a real mouse,
+        so frames that cannot keep up are dropped, not queued.
+        """
+        w = self.window
+        n0 = self.main(lambda: len(w.stats["preview_shown"]))
+        t0 = time.monotonic()
+        for i in range(int(steps)):
+            w.post(lambda: w.drag(mode, dx / steps, dy / steps))
+            time.sleep(max(0.0, t0 + (i + 1) * float(interval) - time.monotonic()))
+        self.main(lambda: None)  # every move has been applied
+        seconds = time.monotonic() - t0
+        shown = self.main(lambda: [t for t in w.stats["preview_shown"] if t0 <= t <= t0 + seconds])
+        return {"pose": asdict(self.main(lambda: w.state.pose)), "drag_seconds": round(seconds, 3),
+                "preview_frames": len(shown), "preview_fps": round(len(shown) / max(seconds, 1e-6), 2),
+                "preview_long_side": self.main(lambda: w._preview_side), "frames_before": n0}
+
+    def op_wheel(self, ticks: float) -> Dict[str, Any]:
+        self.main(lambda: self.window.wheel(float(ticks)))
+        return {"pose": asdict(self.main(lambda: self.window.state.pose))}
+
+    def op_reset_view(self) -> None:
+        self.main(self.window.reset_view)
+
+    def op_set_strength(self, value: float) -> None:
+        self.main(lambda: self.window.set_strength(float(value)))
+
+    def op_set_stylized(self, value: bool) -> None:
+        self.main(lambda: self.window.set_stylized(bool(value)))
+
+    def op_set_export(self, **fields: Any) -> Dict[str, Any]:
+        def apply() -> Dict[str, Any]:
+            w = self.window
+            e = ExportSettings(**{**asdict(w.state.export), **fields})
+            w.state = replace(w.state, export=e)
+            return asdict(e)
+
+        return self.main(apply)
+
+    def op_export(self, path: str, wait: bool = True, timeout: float = 300.0) -> Dict[str, Any]:
+        dest = self.main(lambda: self.window.start_export(path))
+        if wait:
+            t_end = time.monotonic() + float(timeout)
+            while self.window.exporting:
+                if time.monotonic() > t_end:
+                    raise TimeoutError(f"the export did not finish within {timeout:g} s")
+                time.sleep(0.1)
+        return {"destination": dest, "status": self.main(lambda: self.window.panel.status.text)}
+
+    def op_preview_path(self, timeout: float = 120.0) -> Dict[str, Any]:
+        """Play the camera path in the view (as the Preview button does) and wait for its end."""
+        w = self.window
+        n0 = self.main(lambda: len(w.stats["preview_shown"]))
+        self.main(w._on_preview_path)
+        t_end = time.monotonic() + float(timeout)
+        while w._playback is not None:
+            if time.monotonic() > t_end:
+                raise TimeoutError(f"the camera-path preview did not end within {timeout:g} s")
+            time.sleep(0.05)
+        return {"frames_shown": self.main(lambda: len(w.stats["preview_shown"])) - n0}
+
+    def op_wait_export(self, timeout: float = 300.0) -> Dict[str, Any]:
+        """Wait until the running export (if any) ends."""
+        t_end = time.monotonic() + float(timeout)
+        while self.window.exporting:
+            if time.monotonic() > t_end:
+                raise TimeoutError(f"the export did not finish within {timeout:g} s")
+            time.sleep(0.1)
+        return {"status": self.main(lambda: self.window.panel.status.text)}
+
+    def op_ping(self, count: int = 20, interval: float = 0.05) -> Dict[str, Any]:
+        """Round trips to the GUI thread (does the window answer while the worker is busy?)."""
+        times = []
+        for _ in range(int(count)):
+            t0 = time.perf_counter()
+            self.main(lambda: None)
+            times.append(time.perf_counter() - t0)
+            time.sleep(float(interval))
+        busy = not self.main(self.window.worker.is_idle)
+        return {"max_s": round(max(times), 4), "median_s": round(sorted(times)[len(times) // 2], 4),
+                "worker_busy": busy}
+
+    def op_cancel_export(self) -> None:
+        self.main(self.window._on_cancel)
+
+    def op_screenshot(self, path: str, timeout: float = 60.0) -> str:
+        self.main(lambda: self.window.save_screenshot(path))
+        t_end = time.monotonic() + float(timeout)
+        while not (self.window.worker.is_idle() and os.path.exists(path)):
+            if time.monotonic() > t_end:
+                raise TimeoutError(f"{path} was not written within {timeout:g} s")
+            time.sleep(0.05)
+        return path
+
+    def op_grab_window(self, path: str) -> Dict[str, Any]:
+        """Save the window as the X server shows it (menus, panel and view)."""
+        from PIL import ImageGrab
+
+        self.main(self.window.window.post_redraw)
+        time.sleep(0.5)
+        r = self.main(lambda: self.window.window.os_frame)
+        shot = ImageGrab.grab(xdisplay=os.environ.get("DISPLAY"))
+        box = (max(0, r.x), max(0, r.y), min(shot.width, r.x + r.width), min(shot.height, r.y + r.height))
+        shot.crop(box).save(path)
+        return {"path": path, "box": list(box)}
+
+    def op_save_camera_path(self, path: str) -> None:
+        self.main(lambda: self.window.save_camera_path(path))
+        self.op_wait_worker()
+
+    def op_load_camera_path(self, path: str) -> None:
+        self.main(lambda: self.window.load_camera_path(path))
+        self.op_wait_worker()
+
+    def op_wait_worker(self, timeout: float = 60.0) -> None:
+        t_end = time.monotonic() + float(timeout)
+        while not self.window.worker.is_idle():
+            if time.monotonic() > t_end:
+                raise TimeoutError(f"the worker did not finish within {timeout:g} s")
+            time.sleep(0.05)
+        time.sleep(0.1)  # its result reaches the main thread through one more post
+
+    def op_help(self, visible: bool = True) -> None:
+        def show() -> None:
+            if self.window.panel.help.visible != bool(visible):
+                self.window._on_help()
+
+        self.main(show)
+
+    def op_expect_error(self, contains: str, timeout: float = 30.0) -> str:
+        """Wait for an error dialog whose text contains ``contains``; close it."""
+        t_end = time.monotonic() + float(timeout)
+        while time.monotonic() < t_end:
+            found = [e for e in self.window.errors if contains in e]
+            if found:
+                self.main(self.window.window.close_dialog)
+                return found[-1]
+            time.sleep(0.05)
+        raise AssertionError(f"no error dialog containing {contains!r}; errors so far: {self.window.errors}")
+
+    def op_state(self) -> Dict[str, Any]:
+        return self.main(lambda: json.loads(json.dumps(asdict(self.window.state), default=str)))

@@ -1,0 +1,271 @@
+"""The viewer's compute side: the loaded 3D photo, its renderers, the model and the style.
+
+:class:`ViewerSession` has no widgets and knows nothing of Open3D's GUI; the
+window runs its methods as :class:`~app.viewer.worker.ComputeWorker` tasks and
+renders. It keeps everything that does not depend on the camera:
+
+* the 3D photo and a plain renderer over its points in a fixed random order, so
+  a preview renders a *prefix* of them (about ``preview_points_per_pixel`` per
+  output pixel) without copying;
+* when a model checkpoint is available, a :class:`~stylize3d_core.stylize.Stylized3DPhoto`
+  holding the encoded point cloud: a new style re-uses it (no re-encoding), a
+  new strength only re-blends.
+
+Until a trained model ships (``assets/model/stylize3d_lite.safetensors``), the
+session renders the plain 3D photo and says so (:data:`NO_MODEL`).
+
+Everything that fails keeps what was there before: a photo that cannot be read
+leaves the current photo loaded, a style that cannot be read the current style.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Dict, NamedTuple, Optional, Tuple
+
+import cv2
+import numpy as np
+
+from stylize3d_core.errors import InputError
+from stylize3d_core.geometry.camera import Cameras
+from stylize3d_core.io.images import load_image
+from stylize3d_core.io.video import Progress, write_video
+from stylize3d_core.pipeline import load_photo3d
+from stylize3d_core.render.plain import PlainRenderer
+from stylize3d_core.scene.photo3d import Photo3D
+from stylize3d_core.scene.pointcloud import PointCloud
+
+from .orbit import OrbitScene
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+DEFAULT_MODEL = REPO_ROOT / "assets" / "model" / "stylize3d_lite.safetensors"
+"""Where the trained checkpoint lives once it ships."""
+SAMPLE_PHOTO = REPO_ROOT / "assets" / "samples" / "coffee.jpg"
+SAMPLE_STYLE = REPO_ROOT / "assets" / "styles" / "painting_style19_chelsea.jpg"
+NO_MODEL = "no trained model: showing the plain 3D photo"
+STYLE_MAX_SIZE = 512
+"""Style images are read with their long side shrunk to this (the style encoder's own cap)."""
+
+
+@dataclass(frozen=True)
+class SessionSettings:
+    """Options of :class:`ViewerSession`.
+
+    Attributes:
+        preview_points_per_pixel: points a plain preview rasterizes per output pixel. Default 2
+            (holes left by the subset are filled by the renderer's hole filling).
+        seed: seed of the random point order.
+    """
+
+    preview_points_per_pixel: float = 2.0
+    seed: int = 0
+
+
+class PhotoInfo(NamedTuple):
+    """What :meth:`ViewerSession.load_photo` built."""
+
+    path: str
+    size: Tuple[int, int]  # (H, W) of the photo
+    n_points: int
+    fov_y_deg: float
+    depth_source: str
+    scene: OrbitScene
+    seconds: float
+
+
+class StylizeInfo(NamedTuple):
+    """Outcome of :meth:`ViewerSession.prepare_stylized`: whether stylized views are available, and why not."""
+
+    available: bool
+    message: str
+    seconds: float
+
+
+class ViewFrame(NamedTuple):
+    """A rendered view ready for display.
+
+    Attributes:
+        image: (Hd, Wd, 3) uint8, resized to the display size.
+        rendered_size: (H, W) it was rendered at.
+        stylized: True if it came through the model.
+        preview: True for a reduced-resolution preview.
+    """
+
+    image: np.ndarray
+    rendered_size: Tuple[int, int]
+    stylized: bool
+    preview: bool
+
+
+@dataclass(frozen=True)
+class ExportJob:
+    """One export: where, which cameras, frame size (H, W), fps, stylized or original."""
+
+    path: str
+    cameras: Cameras
+    size: Tuple[int, int]
+    fps: float
+    stylized: bool
+
+
+def display_image(rgb: np.ndarray, display_hw: Tuple[int, int]) -> np.ndarray:
+    """(H, W, 3) float RGB -> (Hd, Wd, 3) uint8, resized (bilinear) to ``display_hw``; NaN/inf become 0."""
+    a = np.nan_to_num(np.asarray(rgb, dtype=np.float32), nan=0.0, posinf=1.0, neginf=0.0)
+    u8 = (np.clip(a, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)  # (H, W, 3)
+    hd, wd = int(display_hw[0]), int(display_hw[1])
+    if u8.shape[:2] != (hd, wd):
+        u8 = cv2.resize(u8, (wd, hd), interpolation=cv2.INTER_LINEAR)
+    return np.ascontiguousarray(u8)
+
+
+def shuffled_points(points: PointCloud, seed: int) -> PointCloud:
+    """The same points in a fixed random order (any prefix is a uniform random subset)."""
+    order = np.random.default_rng(seed).permutation(len(points))  # (N,)
+    return PointCloud(points.xyz[order], points.rgb[order], points.label[order], points.image_size, points.fov_y_deg)
+
+
+def preview_point_count(n_points: int, height: int, width: int, per_pixel: float) -> int:
+    """Points a preview of (H, W) rasterizes: ``per_pixel * H * W``, rounded up to 4096, at most all."""
+    want = int(np.ceil(per_pixel * height * width / 4096.0)) * 4096
+    return int(min(n_points, max(4096, want)))
+
+
+class ViewerSession:
+    """The loaded 3D photo, renderers, model and style (see the module docstring).
+
+    Thread use: not thread-safe; every method runs on the compute worker's thread.
+    """
+
+    def __init__(self, model: Optional[str] = None, settings: SessionSettings = SessionSettings(), *,
+                 use_model: bool = True) -> None:
+        self.settings = settings
+        self.use_model = use_model
+        self.model_path: Optional[Path] = Path(model) if model is not None else None
+        self._checkpoint = None
+        self._style_encoder = None
+        self.photo: Optional[Photo3D] = None
+        self.info: Optional[PhotoInfo] = None
+        self._cloud: Optional[PointCloud] = None
+        self._plain: Optional[PlainRenderer] = None
+        self._previews: Dict[int, PlainRenderer] = {}
+        self._stylized = None  # Stylized3DPhoto
+        self.style_path: Optional[str] = None
+        self._style_rgb: Optional[np.ndarray] = None
+        self.strength = 0.8
+
+    # -- model --------------------------------------------------------------------
+    def checkpoint_path(self) -> Optional[Path]:
+        """The checkpoint to use: the one given, else the default if it exists, else None (or if not ``use_model``)."""
+        if not self.use_model:
+            return None
+        if self.model_path is not None:
+            return self.model_path
+        return DEFAULT_MODEL if DEFAULT_MODEL.is_file() else None
+
+    def _load_checkpoint(self):
+        if self._checkpoint is None:
+            path = self.checkpoint_path()
+            if path is None:
+                return None
+            from stylize3d_core.models.checkpoint import load_checkpoint
+
+            self._checkpoint = load_checkpoint(path)  # InputError naming the file if unreadable
+        return self._checkpoint
+
+    @property
+    def can_stylize(self) -> bool:
+        """True when the current photo is encoded for the model."""
+        return self._stylized is not None
+
+    # -- photo --------------------------------------------------------------------
+    def load_photo(self, path: str, depth: str = "auto", *, max_size: int = 640, fov: Optional[float] = None) -> PhotoInfo:
+        """Build the 3D photo of ``path``; on any error the current photo stays loaded."""
+        t0 = time.perf_counter()
+        photo = load_photo3d(str(path), depth, max_size=max_size, fov=fov)
+        ldi = photo.ldi
+        scene = OrbitScene.from_depths(ldi.depth[ldi.photo_region])
+        cloud = shuffled_points(photo.points, self.settings.seed)
+        plain = PlainRenderer(cloud)
+        # Nothing failed: replace the old photo (and drop its encoding).
+        self.photo, self._cloud, self._plain, self._previews, self._stylized = photo, cloud, plain, {}, None
+        self.info = PhotoInfo(str(path), tuple(photo.size), len(cloud), float(photo.fov_y_deg),
+                              photo.depth.source, scene, time.perf_counter() - t0)
+        return self.info
+
+    def prepare_stylized(self) -> StylizeInfo:
+        """Encode the current photo for the model (seconds), re-applying the style and strength."""
+        t0 = time.perf_counter()
+        if self.photo is None:
+            raise InputError("photo", "open a photo first")
+        ck = self._load_checkpoint()
+        if ck is None:
+            return StylizeInfo(False, NO_MODEL, 0.0)
+        from stylize3d_core.models.style_features import StyleEncoder
+        from stylize3d_core.stylize import Stylized3DPhoto, StylizeSettings
+
+        if self._style_encoder is None:
+            self._style_encoder = StyleEncoder()
+        s = Stylized3DPhoto(self.photo, ck, StylizeSettings(strength=self.strength), style_encoder=self._style_encoder)
+        if self._style_rgb is not None:
+            s.set_style(self._style_rgb)
+        self._stylized = s
+        stage = "" if ck.stage == 2 else f" (stage {ck.stage}: no style training)"
+        return StylizeInfo(True, f"model {self.checkpoint_path().name}{stage}", time.perf_counter() - t0)
+
+    # -- style and strength ----------------------------------------------------------
+    def load_style(self, path: str) -> Tuple[int, int]:
+        """Read a style image and apply it (re-using the encoded point cloud); returns its (h, w)."""
+        rgb = load_image(str(path), max_size=STYLE_MAX_SIZE).rgb  # (h, w, 3) float32
+        if self._stylized is not None:
+            self._stylized.set_style(rgb)
+        self._style_rgb, self.style_path = rgb, str(path)
+        return rgb.shape[:2]
+
+    def set_strength(self, strength: float) -> float:
+        """Style strength in [0, 1] (cheap: re-blends the cached features)."""
+        if self._stylized is not None:
+            self._stylized.set_strength(strength)
+        self.strength = float(strength)
+        return self.strength
+
+    # -- rendering ----------------------------------------------------------------
+    def _preview_renderer(self, height: int, width: int) -> PlainRenderer:
+        k = preview_point_count(len(self._cloud), height, width, self.settings.preview_points_per_pixel)
+        if k == len(self._cloud):
+            return self._plain
+        r = self._previews.get(k)
+        if r is None:
+            c = self._cloud
+            r = PlainRenderer(PointCloud(c.xyz[:k], c.rgb[:k], c.label[:k], c.image_size, c.fov_y_deg))
+            self._previews[k] = r
+        return r
+
+    def render(self, camera: Cameras, height: int, width: int, *, preview: bool, stylized: bool) -> np.ndarray:
+        """One view (H, W, 3) float32 in [0, 1]: through the model when ``stylized`` and available."""
+        if self.photo is None:
+            raise InputError("photo", "open a photo first")
+        if stylized and self._stylized is not None:
+            return self._stylized.render(camera, height, width, preview=preview)
+        r = self._preview_renderer(height, width) if preview else self._plain
+        return r.render(camera, height, width)
+
+    def render_view(self, camera: Cameras, size: Tuple[int, int], display_hw: Tuple[int, int], *,
+                    preview: bool, stylized: bool) -> ViewFrame:
+        """Render at ``size`` (H, W) and convert for display at ``display_hw``."""
+        rgb = self.render(camera, size[0], size[1], preview=preview, stylized=stylized)
+        return ViewFrame(display_image(rgb, display_hw), tuple(size), stylized and self.can_stylize, preview)
+
+    def export(self, job: ExportJob, progress: Optional[Progress] = None,
+               between_frames: Optional[Callable[[], object]] = None) -> Path:
+        """Write ``job`` (atomic; see ``stylize3d_core.io.video``); ``between_frames`` runs before each frame."""
+        H, W = job.size
+
+        def frames():
+            for i in range(len(job.cameras)):
+                if between_frames is not None:
+                    between_frames()
+                yield self.render(job.cameras[i], H, W, preview=False, stylized=job.stylized)
+
+        return write_video(job.path, frames(), fps=job.fps, n_frames=len(job.cameras), progress=progress)

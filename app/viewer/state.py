@@ -1,0 +1,262 @@
+"""The viewer's state and scheduling rules: plain data and pure functions, no widgets, no threads.
+
+:class:`ViewState` is an immutable snapshot of everything the user chose (photo,
+style, strength, camera pose, trajectory, export settings); the window replaces
+it with :func:`dataclasses.replace` on every change and hands snapshots to the
+compute worker, so no state is shared between threads.
+
+:class:`FrameScheduler` decides when a frame is needed: a low-resolution preview
+at once after every change, the full-resolution frame once the view has rested
+for ``rest_delay_s``. :func:`adapt_preview_long_side` keeps previews within their
+time budget (>= 10 fps) by shrinking or growing the preview size.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Literal, Optional, Tuple, get_args
+
+from stylize3d_core.checks import check_choice, check_range
+from stylize3d_core.errors import InputError
+from stylize3d_core.geometry.camera import Cameras, check_fov
+from stylize3d_core.geometry.trajectories import TrajectoryName, TrajectorySettings, make_trajectory
+from stylize3d_core.io.video import MAX_GIF_FPS
+
+from .orbit import HOME, OrbitLimits, OrbitPose, OrbitScene, clamp_pose, pose_camera, relative_to
+
+ExportFormat = Literal["mp4", "gif", "png"]
+EXPORT_SUFFIX = {"mp4": ".mp4", "gif": ".gif", "png": ""}
+"""File suffix per export format ("png" writes a folder of frames)."""
+
+LOADED_PATH = "camera path file"
+"""Trajectory-picker entry for a camera path loaded from JSON."""
+
+
+@dataclass(frozen=True)
+class ExportSettings:
+    """What "Export" writes.
+
+    Attributes:
+        format: "mp4" (default, H.264), "gif", or "png" (a folder of frames).
+        size: long side of the frames in pixels (the photo's aspect). Default 512.
+        frames: number of frames of the trajectory. Default 90 (3 s at 30 fps, as the paper's code).
+        fps: frames per second. Default 30.
+    """
+
+    format: ExportFormat = "mp4"
+    size: int = 512
+    frames: int = 90
+    fps: float = 30.0
+
+    def __post_init__(self) -> None:
+        check_choice(self.format, "export format", get_args(ExportFormat))
+        if isinstance(self.size, bool) or int(self.size) != self.size or not 16 <= self.size <= 4096:
+            raise InputError("export size", f"must be an integer from 16 to 4096, got {self.size!r}")
+        if isinstance(self.frames, bool) or int(self.frames) != self.frames or not 1 <= self.frames <= 10000:
+            raise InputError("export frames", f"must be an integer from 1 to 10000, got {self.frames!r}")
+        top = MAX_GIF_FPS if self.format == "gif" else 240.0
+        check_range(self.fps, "export fps", 1.0, top)
+
+
+@dataclass(frozen=True)
+class PreviewSettings:
+    """Frame sizes and timing of the live view.
+
+    Attributes:
+        preview_long_side: long side of the first preview while dragging, pixels. Default 256.
+        min_preview_long_side: smallest preview the adaptation may choose. Default 96.
+        max_preview_long_side: largest preview the adaptation may choose. Default 320.
+        full_long_side: cap on the full-resolution frame's long side (it fits the view). Default 768.
+        target_preview_s: time budget of rendering one preview frame. Default 0.06: with the
+            hand-over to the GUI thread and its redraw, a frame reaches the screen in about 0.1 s (10 fps).
+        rest_delay_s: the camera must rest this long before the full frame is rendered. Default 0.15.
+    """
+
+    preview_long_side: int = 256
+    min_preview_long_side: int = 96
+    max_preview_long_side: int = 320
+    full_long_side: int = 768
+    target_preview_s: float = 0.06
+    rest_delay_s: float = 0.15
+
+    def __post_init__(self) -> None:
+        lo, hi = self.min_preview_long_side, self.max_preview_long_side
+        if not 16 <= lo <= self.preview_long_side <= hi <= 4096:
+            raise InputError("preview sizes", f"need 16 <= min {lo} <= preview {self.preview_long_side} <= max {hi}")
+        check_range(self.full_long_side, "full_long_side", 16, 4096)
+        check_range(self.target_preview_s, "target_preview_s", 0.005, 10.0)
+        check_range(self.rest_delay_s, "rest_delay_s", 0.0, 10.0)
+
+
+@dataclass(frozen=True)
+class ViewState:
+    """Everything the user chose; an immutable snapshot (replace it, never mutate it).
+
+    Attributes:
+        photo: path of the photo, or None before one is opened.
+        style: path of the style image, or None.
+        depth: depth source spec (see ``stylize3d_core.depth.sources``). Default "auto".
+        model: checkpoint path, or None for the default ``assets/model/stylize3d_lite.safetensors``.
+        max_size: long side the photo is shrunk to before building the 3D photo. Default 640.
+        photo_fov: vertical FOV of the photo in degrees; None = from EXIF, else 60.
+        strength: style strength in [0, 1]. Default 0.8.
+        stylized: show the stylized view (True, default) or the original 3D photo.
+        view_fov: vertical FOV of the view in degrees; None = the photo's FOV.
+        pose: the camera relative to the input view.
+        trajectory: the camera-path shape and its parameters (frames come from ``export``).
+        use_loaded_path: follow the camera path loaded from JSON instead of ``trajectory``.
+        export: export settings.
+    """
+
+    photo: Optional[str] = None
+    style: Optional[str] = None
+    depth: str = "auto"
+    model: Optional[str] = None
+    max_size: int = 640
+    photo_fov: Optional[float] = None
+    strength: float = 0.8
+    stylized: bool = True
+    view_fov: Optional[float] = None
+    pose: OrbitPose = HOME
+    trajectory: TrajectorySettings = field(default_factory=TrajectorySettings)
+    use_loaded_path: bool = False
+    export: ExportSettings = field(default_factory=ExportSettings)
+
+    def __post_init__(self) -> None:
+        check_range(self.strength, "strength", 0.0, 1.0)
+        if self.view_fov is not None:
+            check_fov(self.view_fov, "view fov")
+        if self.photo_fov is not None:
+            check_fov(self.photo_fov, "photo fov")
+        check_range(self.max_size, "max_size", 32, 8192)
+        check_choice(self.trajectory.name, "trajectory", get_args(TrajectoryName))
+
+
+def view_fov(state: ViewState, photo_fov_deg: float) -> float:
+    """The view's vertical FOV: the user's choice, else the photo's."""
+    return float(photo_fov_deg if state.view_fov is None else state.view_fov)
+
+
+def view_camera(state: ViewState, scene: OrbitScene, photo_fov_deg: float) -> Cameras:
+    """The camera (a batch of one) the live view shows."""
+    return pose_camera(state.pose, scene, view_fov(state, photo_fov_deg))
+
+
+def fov_range(photo_fov_deg: float) -> Tuple[float, float]:
+    """Range offered by the FOV slider: half to 1.5x the photo's FOV, within [10, 120] degrees."""
+    f = check_fov(photo_fov_deg)
+    return max(10.0, min(0.5 * f, 120.0)), max(10.0, min(1.5 * f, 120.0))
+
+
+def trajectory_cameras(state: ViewState, scene: OrbitScene, photo_fov_deg: float,
+                       loaded: Optional[Cameras] = None) -> Cameras:
+    """The cameras "Export" renders.
+
+    The loaded camera path as it is, when ``state.use_loaded_path``; else the
+    trajectory with ``state.export.frames`` frames and the view's FOV, started
+    from the current view (each trajectory pose is composed with the orbit pose,
+    so the video moves around what the user is looking at).
+    """
+    if state.use_loaded_path:
+        if loaded is None:
+            raise InputError("camera path", "no camera path is loaded")
+        return loaded
+    settings = replace(state.trajectory, n_frames=state.export.frames, fov_y_deg=view_fov(state, photo_fov_deg))
+    return relative_to(state.pose, scene, make_trajectory(settings))
+
+
+def even_size(photo_hw: Tuple[int, int], long_side: int) -> Tuple[int, int]:
+    """(H, W) with the photo's aspect, long side ``long_side``, both even (H.264 needs even sizes)."""
+    h, w = photo_hw
+    if h < 1 or w < 1:
+        raise InputError("photo size", f"must be positive, got {photo_hw!r}")
+    s = long_side / max(h, w)
+    return max(2, int(round(h * s / 2)) * 2), max(2, int(round(w * s / 2)) * 2)
+
+
+def full_frame_size(photo_hw: Tuple[int, int], view_hw: Tuple[int, int], cap: int) -> Tuple[int, int]:
+    """(H, W) of the full-resolution frame: the photo's aspect, fitting ``view_hw``, long side <= ``cap``."""
+    h, w = photo_hw
+    vh, vw = max(1, view_hw[0]), max(1, view_hw[1])
+    fit = min(vh / h, vw / w)  # scale at which the photo fills the view
+    long_side = int(min(cap, max(32, math.floor(fit * max(h, w)))))
+    return even_size(photo_hw, long_side)
+
+
+def adapt_preview_long_side(current: int, seconds: float, settings: PreviewSettings = PreviewSettings()) -> int:
+    """The next preview's long side after one took ``seconds`` at ``current``.
+
+    Render time grows about with the pixel count, so the side scales by
+    ``sqrt(target / seconds)``, damped (at most x1.25 up, /1.5 down per frame),
+    and kept when within 20 % of the target; rounded to a multiple of 16 inside
+    ``[min_preview_long_side, max_preview_long_side]``.
+    """
+    if not math.isfinite(seconds) or seconds <= 0:
+        return int(current)
+    ratio = settings.target_preview_s / seconds
+    if 0.8 <= ratio <= 1.25:
+        return int(current)
+    factor = min(1.25, max(1 / 1.5, math.sqrt(ratio)))
+    nxt = int(round(current * factor / 16)) * 16
+    if nxt == current:  # the rounding must not freeze the adaptation
+        nxt = current + (16 if factor > 1 else -16)
+    return int(min(settings.max_preview_long_side, max(settings.min_preview_long_side, nxt)))
+
+
+def export_destination(path: str, fmt: ExportFormat) -> str:
+    """``path`` with the suffix ``fmt`` needs (MP4/GIF), or a folder path for PNG frames."""
+    check_choice(fmt, "export format", get_args(ExportFormat))
+    p = Path(path)
+    if fmt == "png":
+        return str(p.with_suffix("")) + "/" if p.suffix else (path if path.endswith("/") else path + "/")
+    return str(p.with_suffix(EXPORT_SUFFIX[fmt])) if p.suffix.lower() != EXPORT_SUFFIX[fmt] else path
+
+
+class FrameScheduler:
+    """When the live view needs a preview and when the full frame (pure bookkeeping, times passed in).
+
+    Runs on the GUI main thread only (no locks). ``version`` counts view changes;
+    a frame rendered for an older version is out of date.
+    """
+
+    def __init__(self, rest_delay_s: float = PreviewSettings().rest_delay_s) -> None:
+        self.rest_delay_s = check_range(rest_delay_s, "rest_delay_s", 0.0, 10.0)
+        self.version = 0
+        self._changed_at = -math.inf
+        self._full_requested = -1  # version whose full frame was requested
+        self._full_shown = -1  # version whose full frame is on screen
+
+    def changed(self, now: float) -> int:
+        """The view changed at ``now`` (camera, strength, style, size...): returns the new version."""
+        self.version += 1
+        self._changed_at = now
+        return self.version
+
+    def full_due(self, now: float) -> bool:
+        """True once the view has rested ``rest_delay_s`` and its full frame was not requested yet."""
+        return self._full_requested < self.version and now - self._changed_at >= self.rest_delay_s
+
+    def full_requested(self) -> None:
+        """The full frame of the current version was requested."""
+        self._full_requested = self.version
+
+    def shown(self, version: int, preview: bool) -> None:
+        """A frame of ``version`` is on screen."""
+        if not preview:
+            self._full_shown = max(self._full_shown, version)
+
+    def full_failed(self, version: int) -> None:
+        """The full frame of ``version`` could not be rendered: ask again after the next change only."""
+        self._full_shown = max(self._full_shown, version)
+
+    @property
+    def settled(self) -> bool:
+        """True when the full frame of the current version is on screen."""
+        return self._full_shown >= self.version
+
+
+def clamp_state_pose(state: ViewState, scene: OrbitScene, limits: OrbitLimits = OrbitLimits()) -> ViewState:
+    """``state`` with its pose clamped to ``limits`` for ``scene`` (after a new photo or a loaded path)."""
+    return replace(state, pose=clamp_pose(state.pose, scene, limits))

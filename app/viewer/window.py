@@ -1,0 +1,511 @@
+"""The viewer window: an Open3D ``gui.Window`` showing the rendered view as an image, with a side panel.
+
+Our renderer is the point rasterizer (+ the model's decoder), not Open3D's 3D
+scene renderer, so the view is a ``gui.ImageWidget`` updated with each rendered
+frame, and its mouse events drive the camera (:mod:`app.viewer.orbit`).
+
+Threads:
+
+* the GUI **main thread** runs this class: widgets, ``_on_*`` callbacks, the
+  tick timer (rest detection, camera-path preview);
+* the **compute worker** (:class:`~app.viewer.worker.ComputeWorker`) runs the
+  :class:`~app.viewer.session.ViewerSession`: loading, encoding, styles,
+  renders, export. Its results come back through :meth:`ViewerWindow._post`
+  (``gui.Application.instance.post_to_main_thread``).
+
+Closing: a close request first stops the worker (and the test-script thread),
+then a helper thread waits for them and posts the real ``window.close()``; so no
+thread posts to a destroyed window and nothing closes from a tick callback
+(which crashes Open3D).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+import traceback
+from dataclasses import dataclass, replace
+from typing import Any, Callable, Dict, List, Optional, Tuple
+
+import numpy as np
+import open3d as o3d
+import open3d.visualization.gui as gui
+
+from stylize3d_core.errors import InputError
+from stylize3d_core.io.camera_path import CameraPath
+
+from . import panel as P
+from .actions import WindowActions, ui_callback
+from .orbit import HOME, OrbitLimits, apply_drag, apply_wheel, orbit
+from .session import NO_MODEL, PhotoInfo, ViewerSession, ViewFrame
+from .state import (
+    FrameScheduler, PreviewSettings, ViewState, adapt_preview_long_side, even_size, full_frame_size, view_camera,
+    view_fov,
+)
+from .worker import ComputeWorker, RenderResult
+
+DOUBLE_CLICK_S = 0.35
+
+
+@dataclass(frozen=True)
+class ViewerOptions:
+    """Start-up options (from the command line). See ``app.viewer.entrypoint`` for each flag."""
+
+    photo: Optional[str] = None
+    style: Optional[str] = None
+    depth: str = "auto"
+    model: Optional[str] = None
+    use_model: bool = True
+    max_size: int = 640
+    fov: Optional[float] = None
+    strength: float = 0.8
+    width: int = 1280
+    height: int = 800
+
+
+class ViewerWindow(WindowActions):
+    """The viewer's window, widgets and callbacks (see the module docstring).
+
+    Thread use: GUI main thread only, except :meth:`_post` and :meth:`call_on_main`
+    (any thread) and the worker callbacks they wrap.
+    """
+
+    def __init__(self, options: ViewerOptions) -> None:
+        self.app = gui.Application.instance
+        self._main_ident = threading.get_ident()
+        self.options = options
+        self.state = ViewState(depth=options.depth, model=options.model, max_size=options.max_size,
+                               photo_fov=options.fov, strength=options.strength)
+        self.limits = OrbitLimits()
+        self.preview = PreviewSettings()
+        self.scheduler = FrameScheduler(self.preview.rest_delay_s)
+        self.session = ViewerSession(options.model, use_model=options.use_model)
+        self.worker = ComputeWorker(on_error=lambda name, e: self._post(lambda: self.show_error(name, e)))
+        self.info: Optional[PhotoInfo] = None
+        self.loaded_path: Optional[CameraPath] = None
+        self.stylize_available = False
+        self.errors: List[str] = []
+        self.stats: Dict[str, Any] = {"preview_seconds": [], "full_seconds": [], "full_latency": [], "preview_shown": [],
+                                      "preview_latency": [], "post_delay": []}
+        self.script_thread: Optional[threading.Thread] = None
+        self._preview_side = self.preview.preview_long_side
+        self._display_hw: Tuple[int, int] = (0, 0)
+        self._shown_generation = 0
+        self._shown: Optional[ViewFrame] = None
+        self._requested_at: Dict[int, float] = {}
+        self._drag: Optional[List[Any]] = None  # [mode, last x, last y]
+        self._last_click = (-1.0, 0, 0)
+        self._playback: Optional[Dict[str, Any]] = None
+        self._export_cancel: Optional[threading.Event] = None
+        self._closing = False
+        self._shutdown_done = False
+        self._build()
+        self.worker.start()
+        if options.style:
+            self.open_style(options.style)
+        if options.photo:
+            self.open_photo(options.photo)
+
+    # -- construction -------------------------------------------------------------
+    def _build(self) -> None:
+        if self.app.menubar is None:
+            self.app.menubar = P.build_menubar()
+        w = self.window = self.app.create_window("stylize3d viewer", self.options.width, self.options.height)
+        self.em = em = w.theme.font_size
+        self.image = gui.ImageWidget(o3d.geometry.Image(np.full((8, 12, 3), 32, np.uint8)))
+        self.image.set_on_mouse(self._on_mouse)
+        self.image.set_on_key(self._on_view_key)
+        self.panel = p = P.Panel(em, self.state)
+        for child in (self.image, p.root, p.status_box, p.help):
+            w.add_child(child)
+        w.set_on_layout(self._on_layout)
+        w.set_on_key(self._on_window_key)
+        w.set_on_tick_event(self._on_tick)
+        w.set_on_close(self._on_close)
+        p.open_photo.set_on_clicked(self._on_open_photo)
+        p.sample.set_on_clicked(self._on_sample)
+        p.open_style.set_on_clicked(self._on_open_style)
+        p.depth.set_on_selection_changed(self._on_depth_choice)
+        p.depth_file.set_on_clicked(self._on_open_depth)
+        p.stylized.set_on_clicked(self._on_stylized)
+        p.strength.set_on_value_changed(self._on_strength)
+        p.fov.set_on_value_changed(self._on_fov)
+        p.reset.set_on_clicked(self._on_reset_view)
+        p.trajectory.set_on_selection_changed(self._on_trajectory)
+        for n in (p.amp_x, p.amp_y, p.forward):
+            n.set_on_value_changed(self._on_trajectory_params)
+        p.preview_path.set_on_clicked(self._on_preview_path)
+        p.load_path.set_on_clicked(self._on_load_path)
+        p.save_path.set_on_clicked(self._on_save_path)
+        p.format.set_on_selection_changed(self._on_export_params)
+        for n in (p.size, p.frames, p.fps):
+            n.set_on_value_changed(self._on_export_params)
+        p.export.set_on_clicked(self._on_export)
+        p.screenshot.set_on_clicked(self._on_screenshot)
+        p.cancel.set_on_clicked(self._on_cancel)
+        p.set_enabled(False)
+        menu = {
+            P.MENU_OPEN: self._on_open_photo, P.MENU_STYLE: self._on_open_style, P.MENU_DEPTH: self._on_open_depth,
+            P.MENU_SAMPLE: self._on_sample, P.MENU_LOAD_PATH: self._on_load_path, P.MENU_SAVE_PATH: self._on_save_path,
+            P.MENU_EXPORT: self._on_export, P.MENU_SCREENSHOT: self._on_screenshot, P.MENU_QUIT: self._on_quit,
+            P.MENU_STYLIZED: self._on_stylized_menu, P.MENU_RESET: self._on_reset_view,
+            P.MENU_PREVIEW: self._on_preview_path, P.MENU_HELP: self._on_help, P.MENU_ABOUT: self._on_about,
+        }
+        for item, cb in menu.items():
+            w.set_on_menu_item_activated(item, cb)
+
+    @ui_callback
+    def _on_layout(self, ctx: gui.LayoutContext) -> None:
+        r = self.window.content_rect
+        em, p = self.em, self.panel
+        pw = int(P.Panel.WIDTH_EM * em)
+        sh = int(P.Panel.STATUS_EM * em)
+        self.image.frame = gui.Rect(r.x, r.y, max(1, r.width - pw), r.height)
+        p.root.frame = gui.Rect(r.get_right() - pw, r.y, pw, max(1, r.height - sh))
+        p.status_box.frame = gui.Rect(r.get_right() - pw, r.get_bottom() - sh, pw, sh)
+        hw, hh = int(min(30 * em, r.width - pw)), int(min(29 * em, r.height))
+        p.help.frame = gui.Rect(r.x + (r.width - pw - hw) // 2, r.y + (r.height - hh) // 2, hw, hh)
+        self._update_display_size()
+
+    def _update_display_size(self) -> None:
+        if self.info is None:
+            return
+        f = self.image.frame
+        hw = full_frame_size(self.info.size, (f.height, f.width), self.preview.full_long_side)
+        if hw != self._display_hw:
+            self._display_hw = hw
+            self._view_changed()
+
+    # -- threads ------------------------------------------------------------------
+    def post(self, fn: Callable[[], None]) -> None:
+        """Any thread: run ``fn`` on the main thread without waiting (see :meth:`_post`)."""
+        self._post(fn)
+
+    def _post(self, fn: Callable[[], None]) -> None:
+        """Run ``fn`` on the main thread (at once if already there); dropped once closing has begun."""
+        if self._closing:
+            return
+        if threading.get_ident() == self._main_ident:
+            fn()
+            return
+
+        def guarded() -> None:
+            if self._closing:
+                return
+            try:
+                fn()
+            except Exception as e:  # reported to the user; the session stays usable
+                traceback.print_exc()
+                self.show_error("update", e)
+
+        self.app.post_to_main_thread(self.window, guarded)
+
+    def call_on_main(self, fn: Callable[[], Any], timeout: float = 60.0) -> Any:
+        """From another thread: run ``fn`` on the main thread, wait, return its result (or raise its error)."""
+        done = threading.Event()
+        box: Dict[str, Any] = {}
+
+        def run() -> None:
+            try:
+                box["value"] = fn()
+            except Exception as e:  # handed back to the calling thread
+                box["error"] = e
+            finally:
+                done.set()
+
+        self._post(run)
+        t_end = time.monotonic() + timeout
+        while not done.wait(0.05):
+            if self._closing:
+                raise RuntimeError("the window is closing")
+            if time.monotonic() > t_end:
+                raise TimeoutError(f"the main thread did not answer within {timeout:g} s")
+        if "error" in box:
+            raise box["error"]
+        return box.get("value")
+
+    # -- errors and status ------------------------------------------------------------
+    def show_error(self, what: str, error: BaseException) -> None:
+        """Show ``error`` in a dialog and keep it for the test report (main thread)."""
+        message = str(error) if isinstance(error, InputError) else f"{type(error).__name__}: {error}"
+        self.errors.append(f"{what}: {message}")
+        self.panel.status.text = f"Error ({what})"
+        self.window.show_message_box("stylize3d: " + what, message)
+
+    def _set_status(self, text: str) -> None:
+        self.panel.status.text = text
+
+    def _set_busy(self, text: Optional[str], fraction: Optional[float] = None) -> None:
+        if text is not None:
+            self.panel.status.text = text
+        self.panel.progress.value = 0.0 if fraction is None else float(min(1.0, max(0.0, fraction)))
+
+    # -- view changes and rendering -----------------------------------------------------
+    def _view_changed(self) -> None:
+        """The view changed: ask for a preview now; the tick asks for the full frame once it rests."""
+        self.scheduler.changed(time.monotonic())
+        self._request_render(preview=True)
+
+    def _request_render(self, preview: bool, camera=None) -> None:
+        if self.info is None or self._display_hw == (0, 0):
+            return
+        info = self.info
+        cam = camera if camera is not None else view_camera(self.state, info.scene, info.fov_y_deg)
+        display = self._display_hw
+        size = even_size(info.size, min(self._preview_side, max(display))) if preview else display
+        stylized = self.state.stylized and self.stylize_available
+        version = self.scheduler.version
+        session = self.session
+
+        def render() -> ViewFrame:
+            return session.render_view(cam, size, display, preview=preview, stylized=stylized)
+
+        gen = self.worker.request_render(
+            render, lambda res: self._post(lambda: self._on_frame(res, version)), preview=preview,
+            on_error=lambda name, e: self._post(lambda: self._on_render_failed(name, e, version, preview)))
+        self._requested_at[gen] = time.perf_counter()
+        if not preview and camera is None:
+            self.scheduler.full_requested()
+
+    def _on_frame(self, res: RenderResult, version: int) -> None:
+        if res.generation <= self._shown_generation:
+            return
+        self._shown_generation = res.generation
+        frame: ViewFrame = res.value
+        self.image.update_image(o3d.geometry.Image(frame.image))
+        self.window.post_redraw()
+        self._shown = frame
+        self.scheduler.shown(version, res.preview)
+        now = time.perf_counter()
+        latency = now - self._requested_at.pop(res.generation, now)
+        for g in [g for g in self._requested_at if g < res.generation]:
+            del self._requested_at[g]
+        st = self.stats
+        st["post_delay"].append(now - res.finished)
+        if res.preview:
+            st["preview_latency"].append(latency)
+            st["preview_seconds"].append(res.seconds)
+            st["preview_shown"].append(time.monotonic())
+            self._preview_side = adapt_preview_long_side(self._preview_side, res.seconds, self.preview)
+        else:
+            st["full_seconds"].append(res.seconds)
+            st["full_latency"].append(latency)
+        for value in st.values():
+            if isinstance(value, list):
+                del value[:-200]
+        self._update_fps_label()
+
+    def _update_fps_label(self) -> None:
+        st = self.stats
+        text = ""
+        if st["preview_seconds"]:
+            ms = 1000.0 * float(np.median(st["preview_seconds"][-10:]))
+            text = f"preview {ms:.0f} ms @ {self._preview_side} px"
+        if st["full_seconds"]:
+            text += f"; full {st['full_seconds'][-1]:.2f} s"
+        self.panel.fps_label.text = text
+
+    def _on_render_failed(self, name: str, e: BaseException, version: int, preview: bool) -> None:
+        if not preview:
+            self.scheduler.full_failed(version)
+        self.show_error(name, e)
+
+    @ui_callback
+    def _on_tick(self) -> bool:
+        if self._closing:
+            return False
+        now = time.monotonic()
+        if self._playback is not None:
+            self._step_playback(now)
+        elif self.info is not None and self.scheduler.full_due(now):
+            self._request_render(preview=False)
+        return False
+
+    # -- camera control ---------------------------------------------------------------
+    @ui_callback
+    def _on_mouse(self, e: gui.MouseEvent) -> int:
+        T = gui.MouseEvent.Type
+        if self.info is None:
+            return gui.Widget.EventCallbackResult.IGNORED
+        if e.type == T.BUTTON_DOWN:
+            now = time.monotonic()
+            t0, x0, y0 = self._last_click
+            if e.is_button_down(gui.MouseButton.LEFT) and now - t0 < DOUBLE_CLICK_S and abs(e.x - x0) + abs(e.y - y0) < 6:
+                self._last_click = (-1.0, 0, 0)
+                self.reset_view()
+                return gui.Widget.EventCallbackResult.CONSUMED
+            self._last_click = (now, e.x, e.y)
+            pan = (e.is_button_down(gui.MouseButton.RIGHT) or e.is_button_down(gui.MouseButton.MIDDLE)
+                   or e.is_modifier_down(gui.KeyModifier.SHIFT))
+            self._drag = ["pan" if pan else "orbit", e.x, e.y]
+            return gui.Widget.EventCallbackResult.CONSUMED
+        if e.type == T.DRAG and self._drag is not None:
+            mode, x0, y0 = self._drag
+            self._drag[1:] = [e.x, e.y]
+            self.drag(mode, e.x - x0, e.y - y0)
+            return gui.Widget.EventCallbackResult.CONSUMED
+        if e.type == T.BUTTON_UP:
+            self._drag = None
+            return gui.Widget.EventCallbackResult.CONSUMED
+        if e.type == T.WHEEL:
+            self.wheel(-float(e.wheel_dy))
+            return gui.Widget.EventCallbackResult.CONSUMED
+        return gui.Widget.EventCallbackResult.IGNORED
+
+    def drag(self, mode: str, dx: float, dy: float) -> None:
+        """Apply a mouse drag of (dx, dy) view pixels ("orbit" or "pan"); the test hooks call this too."""
+        if self.info is None or (dx == 0 and dy == 0):
+            return
+        self._stop_playback()
+        view_h = max(1, self.image.frame.height)
+        pose = apply_drag(self.state.pose, mode, dx, dy, view_h, view_fov(self.state, self.info.fov_y_deg),
+                          self.info.scene, self.limits)
+        if pose != self.state.pose:
+            self.state = replace(self.state, pose=pose)
+            self._view_changed()
+
+    def wheel(self, ticks: float) -> None:
+        """Move forwards by ``ticks`` wheel steps (negative: backwards)."""
+        if self.info is None:
+            return
+        pose = apply_wheel(self.state.pose, ticks, self.info.scene, self.limits)
+        if pose != self.state.pose:
+            self.state = replace(self.state, pose=pose)
+            self._view_changed()
+
+    def reset_view(self) -> None:
+        """Back to the photo's own camera and FOV."""
+        self._stop_playback()
+        self.state = replace(self.state, pose=HOME, view_fov=None)
+        if self.info is not None:
+            self.panel.fov.double_value = self.info.fov_y_deg
+        self._view_changed()
+
+    @ui_callback
+    def _on_reset_view(self) -> None:
+        self.reset_view()
+
+    @ui_callback
+    def _on_fov(self, value: float) -> None:
+        self.state = replace(self.state, view_fov=float(value))
+        self._view_changed()
+
+    @ui_callback
+    def _on_window_key(self, e: gui.KeyEvent) -> bool:
+        """Window-wide keys: F1 only (letters would fire while the user types in a field or a file dialog)."""
+        if e.type == gui.KeyEvent.Type.DOWN and e.key == gui.KeyName.F1:
+            self._on_help()
+            return True
+        return False
+
+    @ui_callback
+    def _on_view_key(self, e: gui.KeyEvent) -> int:
+        """Shortcuts while the view has the keyboard focus (after a click in it)."""
+        ignored, consumed = gui.Widget.EventCallbackResult.IGNORED, gui.Widget.EventCallbackResult.CONSUMED
+        if e.type != gui.KeyEvent.Type.DOWN:
+            return ignored
+        K = gui.KeyName
+        actions = {
+            K.O: self._on_open_photo, K.S: self._on_open_style, K.D: self._on_open_depth, K.M: self.load_sample,
+            K.T: self._on_stylized_menu, K.R: self.reset_view, K.C: self._on_preview_path, K.E: self._on_export,
+            K.P: self._on_screenshot, K.H: self._on_help, K.ESCAPE: self._on_escape,
+            K.LEFT: lambda: self._nudge(-1, 0), K.RIGHT: lambda: self._nudge(1, 0),
+            K.UP: lambda: self._nudge(0, 1), K.DOWN: lambda: self._nudge(0, -1),
+            K.PLUS: lambda: self.wheel(1), K.EQUALS: lambda: self.wheel(1), K.MINUS: lambda: self.wheel(-1),
+            K.PAGE_UP: lambda: self.wheel(1), K.PAGE_DOWN: lambda: self.wheel(-1),
+            K.LEFT_BRACKET: lambda: self.set_strength(self.state.strength - 0.1),
+            K.RIGHT_BRACKET: lambda: self.set_strength(self.state.strength + 0.1),
+        }
+        action = actions.get(e.key)
+        if action is None:
+            return ignored
+        action()
+        return consumed
+
+    def _nudge(self, yaw: float, pitch: float) -> None:
+        if self.info is None:
+            return
+        self.state = replace(self.state, pose=orbit(self.state.pose, yaw, pitch, self.info.scene, self.limits))
+        self._view_changed()
+
+    # -- look: stylized / original, strength ----------------------------------------------------
+    @ui_callback
+    def _on_stylized(self, is_on: bool) -> None:
+        self.set_stylized(bool(is_on))
+
+    @ui_callback
+    def _on_stylized_menu(self) -> None:
+        self.set_stylized(not self.state.stylized)
+
+    def set_stylized(self, on: bool) -> None:
+        """Show the stylized view (True) or the original 3D photo."""
+        self.state = replace(self.state, stylized=on)
+        self.panel.stylized.is_on = on
+        if self.app.menubar is not None:
+            self.app.menubar.set_checked(P.MENU_STYLIZED, on)
+        if on and not self.stylize_available:
+            self._set_status(NO_MODEL)
+        self._view_changed()
+
+    @ui_callback
+    def _on_strength(self, value: float) -> None:
+        self.set_strength(value)
+
+    def set_strength(self, value: float) -> None:
+        """Style strength in [0, 1] (a re-blend on the worker, then a new frame)."""
+        a = float(min(1.0, max(0.0, value)))
+        self.state = replace(self.state, strength=a)
+        if abs(self.panel.strength.double_value - a) > 1e-9:
+            self.panel.strength.double_value = a
+        self.worker.submit("strength", lambda: self.session.set_strength(a), key="strength")
+        self._view_changed()
+
+    # -- help, about, quit ---------------------------------------------------------------
+    @ui_callback
+    def _on_help(self) -> None:
+        self.panel.help.visible = not self.panel.help.visible
+        self.window.post_redraw()
+
+    @ui_callback
+    def _on_about(self) -> None:
+        self.window.show_message_box(
+            "About stylize3d", "Stylized 3D photos from one photo and one style image "
+            "(3D Photo Stylization, Mu et al., CVPR 2022). Drag to look around; export videos from the File menu.")
+
+    @ui_callback
+    def _on_quit(self) -> None:
+        self.request_close()
+
+    def is_settled(self) -> bool:
+        """True when the full frame of the current view is on screen and no work is left (test hooks)."""
+        return (self.info is not None and self.scheduler.settled and self.worker.is_idle()
+                and not self.exporting and self._playback is None)
+
+    # -- closing ---------------------------------------------------------------------------
+    def _on_close(self) -> bool:
+        if self._shutdown_done:
+            return True
+        self.request_close()
+        return False
+
+    def request_close(self) -> None:
+        """Stop the worker and the script thread, then close the window (see the module docstring)."""
+        if self._closing:
+            return
+        self._closing = True
+        if self._export_cancel is not None:
+            self._export_cancel.set()
+        self.worker.stop(timeout=0)
+        waiting = [t for t in (self.worker.thread, self.script_thread) if t is not None]
+
+        def finish() -> None:
+            for t in waiting:
+                if t is not threading.current_thread() and t.ident is not None:
+                    t.join()
+            self.app.post_to_main_thread(self.window, self._finish_close)
+
+        threading.Thread(target=finish, name="stylize3d-close", daemon=True).start()
+
+    def _finish_close(self) -> None:
+        self._shutdown_done = True
+        self.window.close()

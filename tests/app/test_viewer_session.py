@@ -1,0 +1,169 @@
+"""The viewer's compute side without a window (app/viewer/session.py).
+
+These are the exact calls the window makes on its worker thread: render the
+view (plain or through the model), re-style, change the strength, export, and
+hand the frame to Open3D as an ``o3d.geometry.Image``.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import open3d as o3d
+import pytest
+import torch
+
+import app.viewer.session as session_mod
+from app.viewer.orbit import HOME, OrbitPose, pose_camera
+from app.viewer.session import (
+    NO_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE, ExportJob, ViewerSession, display_image, preview_point_count,
+)
+from app.viewer.state import even_size
+from stylize3d_core.errors import InputError
+from stylize3d_core.geometry.trajectories import circle
+from stylize3d_core.io.video import ExportCancelled
+from stylize3d_core.models.checkpoint import save_checkpoint
+from stylize3d_core.models.stylize3d import ModelConfig, Stylize3DModel
+
+MAX_SIZE = 160
+
+
+@pytest.fixture(scope="module")
+def untrained(tmp_path_factory) -> Path:
+    """An untrained lite checkpoint (stands in for the trained model in tests)."""
+    torch.manual_seed(0)
+    path = tmp_path_factory.mktemp("model") / "untrained.safetensors"
+    save_checkpoint(path, Stylize3DModel(ModelConfig.lite()), 1, {"note": "untrained, for tests"})
+    return path
+
+
+@pytest.fixture(scope="module")
+def plain() -> ViewerSession:
+    s = ViewerSession(model=None)
+    s.load_photo(str(SAMPLE_PHOTO), "prior", max_size=MAX_SIZE)
+    return s
+
+
+def render(s: ViewerSession, pose=HOME, side=128, preview=False, stylized=False) -> np.ndarray:
+    cam = pose_camera(pose, s.info.scene, s.info.fov_y_deg)
+    H, W = even_size(s.info.size, side)
+    return s.render(cam, H, W, preview=preview, stylized=stylized)
+
+
+def test_plain_view_is_the_photo_and_orbit_shows_parallax(plain):
+    info = plain.info
+    assert max(info.size) == MAX_SIZE and info.n_points > info.size[0] * info.size[1]
+    assert 0 < info.scene.near_depth <= info.scene.centre_depth
+    img = render(plain)
+    hw = even_size(info.size, 128)
+    assert img.shape == (*hw, 3) and img.dtype == np.float32
+    assert np.isfinite(img).all() and img.min() >= 0 and img.max() <= 1 and img.std() > 0.05
+    # Seen from the photo's own camera, the view is the photo (resized).
+    photo = display_image(plain.photo.rgb, hw).astype(np.float32) / 255
+    assert np.abs(img - photo).mean() < 0.05
+    moved = render(plain, OrbitPose(yaw_deg=6.0))
+    assert np.abs(moved - img).mean() > 0.02
+
+
+def test_preview_renders_a_point_subset(plain):
+    assert preview_point_count(10**6, 100, 100, 2.0) == 20480  # 2 * 100 * 100 rounded up to 4096
+    assert preview_point_count(1000, 100, 100, 2.0) == 1000
+    full = render(plain, side=96)
+    prev = render(plain, side=96, preview=True)
+    assert prev.shape == full.shape and np.isfinite(prev).all()
+    assert np.abs(prev - full).mean() < 0.05  # holes of the subset are filled
+
+
+def test_no_model_shows_the_plain_photo(monkeypatch, plain, tmp_path):
+    monkeypatch.setattr(session_mod, "DEFAULT_MODEL", tmp_path / "missing.safetensors")
+    s = ViewerSession(model=None)
+    s.photo, s.info, s._cloud, s._plain = plain.photo, plain.info, plain._cloud, plain._plain
+    r = s.prepare_stylized()
+    assert not r.available and r.message == NO_MODEL and not s.can_stylize
+    s.load_style(str(SAMPLE_STYLE))  # kept for later, no error
+    np.testing.assert_array_equal(render(s, stylized=True), render(s, stylized=False))
+
+
+def test_bad_files_keep_what_was_loaded(plain, tmp_path):
+    info, photo = plain.info, plain.photo
+    broken = tmp_path / "broken.jpg"
+    broken.write_bytes(b"\xff\xd8\xff\xe0 not really a jpeg")
+    for bad in (tmp_path / "missing.jpg", broken):
+        with pytest.raises(InputError, match=bad.name):
+            plain.load_photo(str(bad), "prior", max_size=MAX_SIZE)
+        assert plain.info is info and plain.photo is photo
+    with pytest.raises(InputError, match="depth"):
+        plain.load_photo(str(SAMPLE_PHOTO), "nosuchsource:x", max_size=MAX_SIZE)
+    with pytest.raises(InputError, match="missing.png"):
+        plain.load_style(str(tmp_path / "missing.png"))
+    assert plain.info is info and plain.style_path is None
+
+
+@pytest.mark.parametrize("name, content", [("missing.safetensors", None), ("bad.safetensors", b"not a checkpoint")])
+def test_bad_model_file_is_an_error(tmp_path, plain, name, content):
+    path = tmp_path / name
+    if content is not None:
+        path.write_bytes(content)
+    s = ViewerSession(model=str(path))
+    s.photo, s.info, s._cloud, s._plain = plain.photo, plain.info, plain._cloud, plain._plain
+    with pytest.raises(InputError, match=name):
+        s.prepare_stylized()
+    assert not s.can_stylize
+    assert render(s, stylized=True).std() > 0.05  # the plain view still works
+
+
+@pytest.mark.slow
+def test_stylized_view_restyle_reuses_the_encoding(untrained):
+    s = ViewerSession(model=str(untrained))
+    s.load_photo(str(SAMPLE_PHOTO), "prior", max_size=MAX_SIZE)
+    r = s.prepare_stylized()
+    assert r.available and "stage 1" in r.message and s.can_stylize
+    base = render(s, stylized=True)
+    assert base.shape == (*even_size(s.info.size, 128), 3) and np.isfinite(base).all()
+    assert np.abs(base - render(s, stylized=False)).mean() > 0.02  # through the model, not the plain colours
+    encoded = s._stylized
+    s.load_style(str(SAMPLE_STYLE))
+    assert s._stylized is encoded  # a new style re-uses the encoded point cloud
+    styled = render(s, stylized=True)
+    s.set_strength(0.0)
+    unstyled = render(s, stylized=True)
+    np.testing.assert_allclose(unstyled, base, atol=1e-5)  # strength 0 = no style
+    assert np.abs(styled - unstyled).max() > 1e-4
+    moved = render(s, OrbitPose(yaw_deg=6.0), stylized=True, preview=True)
+    assert np.isfinite(moved).all() and moved.shape == base.shape
+
+
+def test_export_writes_atomically_and_cancels_cleanly(plain, tmp_path):
+    cams = circle(4, fov_y_deg=plain.info.fov_y_deg)
+    size = even_size(plain.info.size, 64)
+    calls, between = [], []
+    out = plain.export(ExportJob(str(tmp_path / "clip.mp4"), cams, size, 8.0, False),
+                       progress=lambda done, total: calls.append((done, total)),
+                       between_frames=lambda: between.append(1))
+    assert out.stat().st_size > 0 and calls[-1] == (4, 4) and len(between) == 4
+    frames = plain.export(ExportJob(str(tmp_path / "frames") + "/", cams, size, 8.0, False))
+    assert sorted(p.name for p in frames.iterdir()) == [f"frame_{i:04d}.png" for i in range(4)]
+
+    def cancel(done, total):
+        if done == 2:
+            raise ExportCancelled("cancelled")
+
+    with pytest.raises(ExportCancelled):
+        plain.export(ExportJob(str(tmp_path / "cancelled.gif"), cams, size, 8.0, False), progress=cancel)
+    assert sorted(os.listdir(tmp_path)) == ["clip.mp4", "frames"]  # no half-written file left behind
+
+
+def test_display_image_and_open3d_handoff():
+    rgb = np.zeros((4, 6, 3), np.float32)
+    rgb[0, 0] = [np.nan, np.inf, -np.inf]
+    rgb[1, 1] = [0.5, 1.5, -0.5]
+    u8 = display_image(rgb, (4, 6))
+    assert u8.dtype == np.uint8 and u8.flags.c_contiguous
+    assert u8[0, 0].tolist() == [0, 255, 0] and u8[1, 1].tolist() == [128, 255, 0]
+    big = display_image(np.full((4, 6, 3), 0.25, np.float32), (8, 12))
+    assert big.shape == (8, 12, 3) and np.all(big == 64)
+    # The hand-off to the window: an o3d.geometry.Image holding the same pixels.
+    img = o3d.geometry.Image(big)
+    np.testing.assert_array_equal(np.asarray(img), big)
