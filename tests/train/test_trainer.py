@@ -77,3 +77,19 @@ def test_bad_settings(data, tmp_path):
         train(TrainConfig(stage=2, data_dir=str(data / "train"), out_dir=str(tmp_path / "x")), log=lambda _: None)
     with pytest.raises(InputError):
         train(TrainConfig(stage=1, data_dir=str(tmp_path / "missing"), out_dir=str(tmp_path / "y")), log=lambda _: None)
+
+
+@pytest.mark.slow
+def test_two_process_ddp_run(data, tmp_path):
+    """torchrun with 2 CPU processes (gloo): gradients are averaged and rank 0 writes the checkpoint."""
+    import subprocess
+    import sys
+
+    out = tmp_path / "ddp"
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node=2",
+           "-m", "app.cli", "train", "--stage", "1", "--data", str(data / "train"), "--out", str(out),
+           "--iterations", "2", "--batch-size", "1", "--threads", "1", "--log-every", "1"]
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=180, check=False)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert load_checkpoint(out / "model_stage1.safetensors").info["iterations"] == 2
+    assert [row["iteration"] for row in _log(out, 1)] == [1, 2]
