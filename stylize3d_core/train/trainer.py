@@ -55,22 +55,24 @@ Log = Callable[[str], None]
 
 @dataclass(frozen=True)
 class LossWeights:
-    """Weights of the loss terms.
+    """Weights of the loss terms (chosen so that, at the start of each stage, no
+    term is negligible: the raw EfficientNet-feature losses are 10-1000x the pixel ones).
 
     Attributes:
         l1: stage 1, L1 between prediction and target (masked). Default 1.
-        perceptual: stage 1, EfficientNet feature L1 (its raw value is ~10x the
-            pixel L1 at the start). Default 0.05.
-        content: stage 2, AdaAttN content (local feature) loss. Default 1 (public code).
-        style: stage 2, global mean/std style loss. Default 3.
-        consistency: both stages, multi-view consistency L1. Default 1.
+        perceptual: stage 1, EfficientNet feature L1 (raw ~3x the pixel L1 at the start). Default 0.05.
+        content: stage 2, AdaAttN content (local feature) loss (raw ~9 at the start). Default 1.
+        style: stage 2, global mean/std style loss (raw ~60 at the start). Default 0.1.
+        consistency: stage 1 (and stage-2 strength-0 steps), multi-view consistency L1. Default 1.
+        consistency_stylized: stage 2, multi-view consistency L1 of stylized views (raw ~0.007). Default 50.
     """
 
     l1: float = 1.0
     perceptual: float = 0.05
     content: float = 1.0
-    style: float = 3.0
+    style: float = 0.1
     consistency: float = 1.0
+    consistency_stylized: float = 50.0
 
 
 @dataclass(frozen=True)
@@ -192,7 +194,8 @@ class TrainStep(nn.Module):
             terms["style"] = w.style * st.style
         n = geom.xyz.shape[0]
         pick = torch.randperm(n, generator=generator)[: self.consistency_points]
-        terms["consistency"] = w.consistency * consistency_loss(geom.xyz[pick], views, zbufs, sample)
+        weight = w.consistency if style is None else w.consistency_stylized
+        terms["consistency"] = weight * consistency_loss(geom.xyz[pick], views, zbufs, sample)
         return terms
 
 
