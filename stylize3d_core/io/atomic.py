@@ -51,7 +51,6 @@ def atomic_path(destination: PathLike, *, directory: bool = False) -> Iterator[P
         fd, name = tempfile.mkstemp(prefix=f".{dest.stem}.", suffix=f".partial{dest.suffix}", dir=parent)
         os.close(fd)
         tmp = Path(name)
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes it 0600; give it a normal file's mode
     try:
         yield tmp
         if directory:
@@ -65,6 +64,8 @@ def atomic_path(destination: PathLike, *, directory: bool = False) -> Iterator[P
         else:
             if tmp.stat().st_size == 0:
                 raise ExportError(f"{dest}: the writer produced an empty file; nothing was written")
+            # mkstemp (and some writers, e.g. safetensors) create 0600 files: give it a normal file's mode.
+            os.chmod(tmp, 0o666 & ~_umask())
             os.replace(tmp, dest)
     except BaseException:
         if tmp.is_dir():

@@ -78,3 +78,17 @@ def test_written_file_gets_a_normal_mode(tmp_path):
     finally:
         os.umask(mask)
     assert dest.stat().st_mode & 0o777 == 0o644
+
+
+def test_mode_is_normal_even_if_the_writer_recreates_the_file(tmp_path):
+    dest = tmp_path / "y.bin"
+    mask = os.umask(0o022)
+    try:
+        with atomic_path(dest) as tmp:
+            tmp.unlink()
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT, 0o600)
+            os.write(fd, b"data")
+            os.close(fd)
+    finally:
+        os.umask(mask)
+    assert dest.stat().st_mode & 0o777 == 0o644
