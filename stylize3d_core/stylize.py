@@ -9,7 +9,7 @@ what changes           what is recomputed                           typical cost
 photo                  geometry (NDC, FPS, ball queries, 3-NN),     seconds
                        content features
 style                  style CNN features, AdaAttN                  < 1 s
-strength               blend + IDW upsampling to every point        ~0.1 s
+strength               blend + IDW upsampling to every point        ~0.1 s (at the next render)
 camera                 rasterize + U-Net decode                     see benchmarks
 =====================  ==========================================  ==================
 
@@ -109,7 +109,6 @@ class Stylized3DPhoto:
         self._dense: Optional[torch.Tensor] = None  # (N, Cr) in self._order
         self._strength = settings.strength
         self.timings.update({"geometry": t1 - t0, "encode": t2 - t1})
-        self._update_dense()
 
     @property
     def num_points(self) -> int:
@@ -138,12 +137,12 @@ class Stylized3DPhoto:
                 maps = self._encoder()(style_tensor(style_rgb)).maps
                 self._stylized = self.model.stylizer.stylize(self._content, maps)  # (M, C)
             self.timings["style"] = time.perf_counter() - t0
-        self._update_dense()
+        self._dense = None
 
     def set_strength(self, strength: float) -> None:
         """Change the style strength in [0, 1] (cheap: no re-encoding, no new style features)."""
         self._strength = check_range(strength, "strength", 0.0, 1.0)
-        self._update_dense()
+        self._dense = None
 
     def _update_dense(self) -> None:
         t0 = time.perf_counter()
@@ -158,6 +157,8 @@ class Stylized3DPhoto:
 
     def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False) -> np.ndarray:
         """One view (H, W, 3) float32 in [0, 1]; ``preview`` renders a point subset without supersampling."""
+        if self._dense is None:  # upsampled lazily: a style set right after construction is not done twice
+            self._update_dense()
         n = self.num_points
         if preview:
             keep = int(min(n, max(1024, self.settings.preview_points_per_pixel * height * width)))
