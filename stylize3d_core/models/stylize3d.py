@@ -14,11 +14,12 @@ The projection to ``raster_channels`` happens before the IDW upsampling: both
 are linear and the IDW weights sum to one, so the order does not change the
 result, and projecting the M sparse points is 16x cheaper than the N dense ones.
 
-Why an encoder subset: the encoder's ball radii are fixed in NDC and capped at
-k = 16 neighbours, so a cloud much denser than the paper's (~262k points at
-512 x 512) would see smaller neighbourhoods than in training. Clouds larger
-than ``encoder_max_points`` are therefore encoded from a fixed random subset;
-the features reach every point through the 3-NN upsampling.
+Ball radii follow the cloud's density: the published radii suit ~512 points
+across, and :func:`radius_scale` scales them for any other density, so every
+ball spans about as many points as in the paper. Clouds larger than
+``encoder_max_points`` are encoded from a fixed random subset (the encoder's
+cost grows with the points; its radii are scaled to the subset's density); the
+features reach every point through the 3-NN upsampling.
 """
 
 from __future__ import annotations
@@ -71,7 +72,7 @@ class ModelConfig:
         raster_channels: channels splatted by the rasterizer (the decoder's input).
         decoder: the U-Net; ``in_channels`` must equal ``raster_channels``.
         encoder_max_points: clouds larger than this are encoded from a random
-            subset of this size (see the module docstring). Default 300k.
+            subset of this size, to bound the encoder's cost (see the module docstring). Default 300k.
     """
 
     name: ConfigName = "lite"
@@ -196,14 +197,12 @@ class Stylize3DModel(nn.Module):
 
     def render_view(
         self, dense: torch.Tensor, xyz: torch.Tensor, camera: Cameras, height: int, width: int,
-        supersample: int = 1, point_stride: int = 1,
+        supersample: int = 1,
     ) -> Tuple[torch.Tensor, Fragments]:
         """Decode one view: (3, H, W) RGB in (0, 1) and the rasterizer's fragments.
 
-        ``point_stride`` > 1 renders every k-th point only (fast low-resolution previews).
+        For a fast preview pass a subset of the points (see ``Stylized3DPhoto``).
         """
-        if point_stride > 1:
-            dense, xyz = dense[::point_stride], xyz[::point_stride]
         settings = RasterSettings(height=int(height), width=int(width), supersample=supersample)
         frags = PointRasterizer(settings)(xyz, dense, camera)
         features = frags.image.unsqueeze(0)  # (1, Cr, H, W)
@@ -217,11 +216,6 @@ def count_parameters(module: nn.Module) -> int:
     return sum(p.numel() for p in module.parameters() if p.requires_grad)
 
 
-def default_device() -> torch.device:
-    """CUDA when available, else the CPU."""
-    return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-
-
 __all__ = [
-    "ModelConfig", "SceneGeometry", "prepare_geometry", "Stylize3DModel", "count_parameters", "default_device",
+    "ModelConfig", "SceneGeometry", "prepare_geometry", "Stylize3DModel", "count_parameters",
 ]

@@ -35,7 +35,6 @@ from typing import Callable, Dict, List, Optional
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 from torch import nn
 
 from ..checks import check_range
@@ -49,6 +48,10 @@ from ..points import three_nn
 from ..render.reproject import pairwise_consistency, sample_view
 from .cache import TrainDataset
 from .data import TrainSample
+from .styles import StyleBank
+
+STYLE_CROP = 160
+"""Side of the random style crops shown to the stylizer in stage 2, in pixels."""
 
 Log = Callable[[str], None]
 
@@ -199,27 +202,6 @@ class TrainStep(nn.Module):
         return terms
 
 
-def _load_styles(styles_dir: str) -> List[torch.Tensor]:
-    from ..io.images import load_image
-
-    folder = Path(styles_dir)
-    files = sorted(folder.glob("*.png")) + sorted(folder.glob("*.jpg"))
-    if not files:
-        raise InputError(folder, "no style images (*.png, *.jpg) found; run `stylize3d prepare-styles` first")
-    return [torch.from_numpy(load_image(f, max_size=256).rgb).permute(2, 0, 1).contiguous() for f in files]
-
-
-def _random_style(styles: List[torch.Tensor], rng: np.random.Generator, size: int = 160) -> torch.Tensor:
-    """A random crop of a random style image, resized to ``size`` on the short side, with a random flip."""
-    s = styles[int(rng.integers(len(styles)))]
-    _, h, w = s.shape
-    c = int(rng.integers(min(h, w) // 2, min(h, w) + 1))
-    y, x = int(rng.integers(0, h - c + 1)), int(rng.integers(0, w - c + 1))
-    crop = s[:, y: y + c, x: x + c].unsqueeze(0)
-    crop = F.interpolate(crop, size=(size, size), mode="bilinear", align_corners=False, antialias=True)[0]
-    return crop.flip(-1) if rng.random() < 0.5 else crop
-
-
 def _dist_info():
     world = int(os.environ.get("WORLD_SIZE", "1"))
     rank = int(os.environ.get("RANK", "0"))
@@ -281,7 +263,7 @@ def train(config: TrainConfig, log: Log = print) -> Path:
         opt.load_state_dict(state["optimizer"])
 
     data = TrainDataset(config.data_dir)
-    styles = _load_styles(config.styles_dir) if config.stage == 2 else []
+    styles = StyleBank(config.styles_dir, max_size=256) if config.stage == 2 else None
     t_start = time.time()
     info = {"stage": config.stage, "config": asdict(config), "data": str(config.data_dir), "samples": len(data)}
 
@@ -302,7 +284,7 @@ def train(config: TrainConfig, log: Log = print) -> Path:
         recon = config.stage == 2 and rng.random() < config.recon_fraction
         for b, i in enumerate(indices):
             sample = data[int(i)]
-            style = _random_style(styles, rng).to(device) if config.stage == 2 and not recon else None
+            style = styles.sample(rng, STYLE_CROP)[0].to(device) if styles is not None and not recon else None
             sync = world > 1 and b < len(indices) - 1
             ctx = ddp.no_sync() if sync else contextlib.nullcontext()
             with ctx:

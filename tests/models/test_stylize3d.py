@@ -88,17 +88,6 @@ def test_encoder_subset_for_large_clouds(cloud):
     assert geom.upsample.idx.shape[0] == pts.xyz.shape[0]
 
 
-def test_preview_stride_renders_fewer_points(cloud):
-    pts, fov = cloud
-    geom = prepare_geometry(pts.xyz, pts.rgb, fov, (40, 48), TINY)
-    model = Stylize3DModel(TINY).eval()
-    with torch.no_grad():
-        dense = model.dense_features(model.encode(geom), geom)
-        full, _ = model.render_view(dense, geom.xyz, Cameras.identity(fov), 20, 24)
-        fast, _ = model.render_view(dense, geom.xyz, Cameras.identity(fov), 20, 24, point_stride=4)
-    assert full.shape == fast.shape and torch.isfinite(fast).all()
-
-
 def test_config_checks():
     with pytest.raises(InputError):
         ModelConfig(raster_channels=16)  # decoder expects 32
