@@ -87,6 +87,8 @@ def _add_training(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--iterations", type=int, default=d.iterations, help=f"total steps (default {d.iterations})")
     p.add_argument("--batch-size", type=int, default=d.batch_size, help=f"samples per step (default {d.batch_size})")
     p.add_argument("--lr", type=float, default=d.lr, help=f"Adam learning rate (default {d.lr:g})")
+    p.add_argument("--lr-schedule", choices=("constant", "cosine"), default=d.lr_schedule,
+                   help="constant, or cosine decay to 0 at --iterations (default constant)")
     p.add_argument("--hours", type=float, default=None, help="stop (with a checkpoint) after this many hours")
     p.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every)
     p.add_argument("--log-every", type=int, default=d.log_every)
@@ -127,8 +129,8 @@ def _train(args: argparse.Namespace) -> int:
 
     config = TrainConfig(
         stage=args.stage, model=args.config, data_dir=args.data, styles_dir=args.styles, out_dir=args.out,
-        iterations=args.iterations, batch_size=args.batch_size, lr=args.lr, checkpoint_every=args.checkpoint_every,
-        log_every=args.log_every,
+        iterations=args.iterations, batch_size=args.batch_size, lr=args.lr, lr_schedule=args.lr_schedule,
+        checkpoint_every=args.checkpoint_every, log_every=args.log_every,
         max_hours=args.hours, init=args.init, seed=args.seed, threads=args.threads,
     )
     path = train(config, log=lambda msg: print(f"{PROG}: {msg}", file=sys.stderr, flush=True))

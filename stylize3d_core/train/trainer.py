@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import time
 from dataclasses import asdict, dataclass
@@ -54,6 +55,8 @@ STYLE_CROP = 160
 """Side of the random style crops shown to the stylizer in stage 2, in pixels."""
 
 Log = Callable[[str], None]
+
+LR_SCHEDULES = ("constant", "cosine")
 
 
 @dataclass(frozen=True)
@@ -91,6 +94,9 @@ class TrainConfig:
         iterations: total optimizer steps of the stage (public code: 20k).
         batch_size: samples per step (public code: 8).
         lr: Adam learning rate (public code: 1e-4).
+        lr_schedule: "constant" (public code), or "cosine": the rate at iteration
+            ``it`` is ``lr * (1 + cos(pi * it / iterations)) / 2``, so it depends only on
+            the iteration and a resumed run continues the same curve.
         weights: loss weights.
         consistency_points: points sampled per sample for the consistency loss.
         recon_fraction: stage 2, fraction of steps that train strength 0 with the stage-1 loss.
@@ -110,6 +116,7 @@ class TrainConfig:
     iterations: int = 20000
     batch_size: int = 8
     lr: float = 1e-4
+    lr_schedule: str = "constant"
     weights: LossWeights = LossWeights()
     consistency_points: int = 4096
     recon_fraction: float = 0.2
@@ -127,9 +134,19 @@ class TrainConfig:
         for name in ("iterations", "batch_size", "consistency_points", "checkpoint_every", "log_every"):
             check_range(getattr(self, name), name, 1, 1e9)
         check_range(self.lr, "lr", 0.0, 1.0, inclusive=False)
+        if self.lr_schedule not in LR_SCHEDULES:
+            raise InputError("lr_schedule", f"must be one of {', '.join(LR_SCHEDULES)}, got {self.lr_schedule!r}")
         check_range(self.recon_fraction, "recon_fraction", 0.0, 1.0)
         if self.max_hours is not None:
             check_range(self.max_hours, "max_hours", 0.0, 1e4, inclusive=False)
+
+
+def learning_rate(config: TrainConfig, iteration: int) -> float:
+    """The Adam learning rate for the step that starts at ``iteration`` (see ``TrainConfig.lr_schedule``)."""
+    if config.lr_schedule == "cosine":
+        t = min(max(iteration / config.iterations, 0.0), 1.0)
+        return config.lr * 0.5 * (1.0 + math.cos(math.pi * t))
+    return config.lr
 
 
 def geometry_from_sample(sample: TrainSample) -> SceneGeometry:
@@ -280,6 +297,8 @@ def train(config: TrainConfig, log: Log = print) -> Path:
     t_log = time.time()
     while it < config.iterations:
         opt.zero_grad(set_to_none=True)
+        for group in opt.param_groups:
+            group["lr"] = learning_rate(config, it)
         indices = rng.integers(0, len(data), size=config.batch_size)
         recon = config.stage == 2 and rng.random() < config.recon_fraction
         for b, i in enumerate(indices):
@@ -301,7 +320,8 @@ def train(config: TrainConfig, log: Log = print) -> Path:
         if it % config.log_every == 0 and rank == 0:
             means = {k: float(np.mean(v)) for k, v in window.items()}
             sec = (time.time() - t_log) / config.log_every
-            line = {"iteration": it, **means, "total": sum(means.values()), "sec_per_it": round(sec, 3)}
+            line = {"iteration": it, **means, "total": sum(means.values()), "sec_per_it": round(sec, 3),
+                    "lr": learning_rate(config, it - 1)}
             with open(log_path, "a", encoding="utf-8") as f:
                 f.write(json.dumps(line) + "\n")
             log(f"stage {config.stage} it {it}/{config.iterations} " + " ".join(f"{k} {v:.4f}" for k, v in means.items())

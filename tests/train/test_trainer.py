@@ -9,7 +9,7 @@ from stylize3d_core.io.images import save_image
 from stylize3d_core.models.checkpoint import load_checkpoint
 from stylize3d_core.train.cache import build_dataset
 from stylize3d_core.train.data import DataConfig
-from stylize3d_core.train.trainer import TrainConfig, train
+from stylize3d_core.train.trainer import TrainConfig, learning_rate, train
 
 SMALL = DataConfig(image_size=(32, 40), scene_textures=3, texture_size=32)
 
@@ -68,11 +68,36 @@ def test_stage2_trains_stylizer_with_frozen_encoder(data, tmp_path):
     assert all(np.isfinite(r["total"]) for r in log)
 
 
+def test_cosine_schedule_depends_only_on_the_iteration():
+    const = TrainConfig(lr=3e-4, iterations=100)
+    assert learning_rate(const, 0) == learning_rate(const, 99) == 3e-4
+    cos = TrainConfig(lr=3e-4, iterations=100, lr_schedule="cosine")
+    assert learning_rate(cos, 0) == pytest.approx(3e-4)
+    assert learning_rate(cos, 50) == pytest.approx(1.5e-4)
+    assert learning_rate(cos, 100) == pytest.approx(0.0, abs=1e-15)
+    assert learning_rate(cos, 250) == pytest.approx(0.0, abs=1e-15)  # past the end (a run extended later)
+    rates = [learning_rate(cos, i) for i in range(101)]
+    assert all(a >= b for a, b in zip(rates, rates[1:]))
+
+
+def test_cosine_run_logs_the_rate_and_resumes_on_the_curve(data, tmp_path):
+    out = tmp_path / "run"
+    cfg = TrainConfig(stage=1, data_dir=str(data / "train"), out_dir=str(out), iterations=4, batch_size=1,
+                      lr=1e-3, lr_schedule="cosine", log_every=1, checkpoint_every=2, threads=1)
+    train(TrainConfig(**{**cfg.__dict__, "max_hours": 1e-9}), log=lambda _: None)  # stops after one step
+    train(cfg, log=lambda _: None)
+    log = _log(out, 1)
+    assert [r["iteration"] for r in log] == [1, 2, 3, 4]
+    assert [r["lr"] for r in log] == pytest.approx([learning_rate(cfg, i) for i in range(4)])
+
+
 def test_bad_settings(data, tmp_path):
     with pytest.raises(InputError):
         TrainConfig(stage=3)
     with pytest.raises(InputError):
         TrainConfig(model="huge")
+    with pytest.raises(InputError, match="lr_schedule"):
+        TrainConfig(lr_schedule="step")
     with pytest.raises(InputError, match="stage-1"):
         train(TrainConfig(stage=2, data_dir=str(data / "train"), out_dir=str(tmp_path / "x")), log=lambda _: None)
     with pytest.raises(InputError):
