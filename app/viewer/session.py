@@ -30,7 +30,7 @@ import numpy as np
 
 from stylize3d_core.errors import InputError
 from stylize3d_core.geometry.camera import Cameras
-from stylize3d_core.io.images import load_image
+from stylize3d_core.io.images import load_image, to_uint8
 from stylize3d_core.io.video import Progress, write_video
 from stylize3d_core.pipeline import load_photo3d
 from stylize3d_core.render.plain import PlainRenderer
@@ -113,7 +113,7 @@ class ExportJob:
 def display_image(rgb: np.ndarray, display_hw: Tuple[int, int]) -> np.ndarray:
     """(H, W, 3) float RGB -> (Hd, Wd, 3) uint8, resized (bilinear) to ``display_hw``; NaN/inf become 0."""
     a = np.nan_to_num(np.asarray(rgb, dtype=np.float32), nan=0.0, posinf=1.0, neginf=0.0)
-    u8 = (np.clip(a, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)  # (H, W, 3)
+    u8 = to_uint8(a)  # (H, W, 3)
     hd, wd = int(display_hw[0]), int(display_hw[1])
     if u8.shape[:2] != (hd, wd):
         u8 = cv2.resize(u8, (wd, hd), interpolation=cv2.INTER_LINEAR)

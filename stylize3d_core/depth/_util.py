@@ -28,9 +28,6 @@ def check_rgb(rgb: np.ndarray, name: str = "rgb") -> np.ndarray:
     return np.clip(rgb, 0.0, 1.0).astype(np.float32)
 
 
-def to_uint8(rgb: np.ndarray) -> np.ndarray:
-    """(H, W, C) float in [0, 1] -> uint8, rounded."""
-    return np.clip(rgb * 255.0 + 0.5, 0, 255).astype(np.uint8)
 
 
 def resize_long_side(img: np.ndarray, long_side: int) -> np.ndarray:

@@ -15,7 +15,8 @@ import cv2
 import numpy as np
 
 from ..io.depth_files import fill_nearest
-from ._util import normalise_percentiles, to_uint8
+from ..io.images import to_uint8
+from ._util import normalise_percentiles
 
 
 def saliency_map(rgb: np.ndarray, focus: np.ndarray) -> np.ndarray:

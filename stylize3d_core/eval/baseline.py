@@ -22,6 +22,7 @@ from PIL import Image
 from ..checks import check_range, check_shape
 from ..errors import InputError
 from ..geometry.camera import Cameras
+from ..io.images import to_uint8
 from ..render.plain import PlainRenderer, PlainRenderSettings
 from ..scene.photo3d import Photo3D
 
@@ -51,7 +52,7 @@ def to_u8(image: np.ndarray, name: str) -> np.ndarray:
         raise InputError(name, f"expected a float image in [0, 1], got {arr.dtype}")
     if not np.isfinite(arr).all():
         raise InputError(name, "contains NaN or infinite values")
-    return np.clip(np.rint(arr * 255.0), 0, 255).astype(np.uint8)
+    return to_uint8(arr)
 
 
 def stylize_frames_2d(

@@ -396,6 +396,14 @@ def _finish(rgb, alpha, path, source, bits, focal, max_size, min_size) -> Loaded
 # ---------------------------------------------------------------------------- resize / save
 
 
+def to_uint8(rgb: np.ndarray) -> np.ndarray:
+    """Float colours in [0, 1] -> uint8: scaled by 255, rounded to nearest and clipped to [0, 255].
+
+    ``k / 255`` maps back to ``k`` exactly. The caller checks finiteness (NaN has no uint8 value).
+    """
+    return np.clip(np.rint(np.asarray(rgb, dtype=np.float32) * 255.0), 0, 255).astype(np.uint8)
+
+
 def resize_image(rgb: np.ndarray, size_hw: Tuple[int, int]) -> np.ndarray:
     """Resize an image (H, W, C) or (H, W) of values in [0, 1] to ``size_hw``; returns float32, clipped.
 

@@ -31,6 +31,7 @@ import torch
 
 from ..errors import ExportError, InputError, PathLike
 from .atomic import atomic_path
+from .images import to_uint8
 
 _PLY_TYPES: Dict[str, str] = {
     "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
@@ -74,7 +75,7 @@ def _colours_u8(rgb: np.ndarray, n: int) -> np.ndarray:
         raise InputError("rgb", f"expected uint8 or float values in [0, 1], got dtype {rgb.dtype}")
     if not np.isfinite(rgb).all():
         raise InputError("rgb", "contains NaN or infinite values")
-    return (np.clip(rgb, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)  # (N, 3)
+    return to_uint8(rgb)  # (N, 3)
 
 
 def write_ply(path: PathLike, xyz: Any, rgb: Any, *, labels: Optional[Any] = None) -> Path:

@@ -36,6 +36,7 @@ from PIL import Image
 
 from ..errors import ExportError, InputError, PathLike, Stylize3DError
 from .atomic import atomic_path
+from .images import to_uint8
 
 Progress = Callable[[int, Optional[int]], None]
 """``progress(done, total)``: called after each frame is written; ``total`` is None if unknown."""
@@ -85,7 +86,7 @@ def to_uint8_frame(frame: np.ndarray, index: int) -> np.ndarray:
         raise InputError(name, f"expected uint8 or float values in [0, 1], got dtype {a.dtype}")
     if not np.isfinite(a).all():
         raise InputError(name, "contains NaN or infinite values")
-    return (np.clip(a, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)  # (H, W, 3)
+    return to_uint8(a)  # (H, W, 3)
 
 
 class _FrameSource:

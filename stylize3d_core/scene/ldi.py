@@ -49,6 +49,7 @@ from ..checks import check_choice, check_range, check_shape
 from ..depth.types import DepthMap
 from ..errors import InputError
 from ..geometry.camera import NEAR_DEPTH
+from ..io.images import to_uint8
 from ._fill import box_clusters, cross_median, nearest_index, push_pull, ring_min, torn_regions
 
 ORIGINAL = 0
@@ -365,7 +366,7 @@ def _hidden_layer(
         )
         behind = np.minimum(blur_nd, ndc - t)  # (h, w) strictly behind the foreground
         context = np.where(source[..., None], rgbc, bg_rgb)  # background-only colours
-        context8 = np.clip(np.rint(context * 255.0), 0, 255).astype(np.uint8)
+        context8 = to_uint8(context)
         colour = cv2.inpaint(context8, band.astype(np.uint8), s.inpaint_radius, flag)
         sub_mask = mask[rows, cols]
         sub_mask |= band

@@ -47,6 +47,7 @@ from ..depth.prior import estimate_prior
 from ..errors import InputError
 from ..geometry.camera import Cameras
 from ..geometry.ndc import NDCParams, ndc_params, to_ndc
+from ..io.images import to_uint8
 from ..models.encoder import EncoderConfig, PointHierarchy, build_hierarchy
 from ..models.stylize3d import radius_scale
 from ..render.holes import fill_holes
@@ -224,18 +225,13 @@ class TrainSample(NamedTuple):
         return int(self.image.shape[0]), int(self.image.shape[1])
 
 
-def to_u8(x: np.ndarray) -> np.ndarray:
-    """Float colours in [0, 1] -> uint8 (rounded)."""
-    return np.clip(np.rint(np.asarray(x, np.float32) * 255.0), 0, 255).astype(np.uint8)
-
-
 def from_u8(x: torch.Tensor) -> torch.Tensor:
     """uint8 colours -> float32 multiples of 1/255 (the one place this division happens)."""
     return x.to(torch.float32) / 255.0
 
 
 def _quantised(x: np.ndarray) -> torch.Tensor:
-    return from_u8(torch.from_numpy(to_u8(x)))
+    return from_u8(torch.from_numpy(to_uint8(x)))
 
 
 def _render_ldi_targets(

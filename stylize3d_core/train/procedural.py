@@ -37,6 +37,7 @@ import numpy as np
 from ..checks import check_range, check_shape
 from ..errors import InputError
 from ..geometry.camera import Cameras
+from ..io.images import to_uint8
 
 # ----------------------------------------------------------------------------- depth maps
 
@@ -95,7 +96,7 @@ def random_depth(rng: np.random.Generator, size: Tuple[int, int], photo: Optiona
     if photo is not None:
         check_shape(photo, "photo", (h, w, 3))
         seg = cv2.ximgproc.segmentation.createGraphSegmentation(sigma=0.8, k=300, min_size=max(20, h * w // 400))
-        segments = seg.processImage(np.clip(np.rint(photo * 255), 0, 255).astype(np.uint8))
+        segments = seg.processImage(to_uint8(photo))
     n_objects = int(rng.choice([0, 1, 1, 2, 2, 3, 4]))
     for _ in range(n_objects):
         mask = _shape_mask(rng, h, w, segments)

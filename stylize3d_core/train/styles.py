@@ -32,7 +32,7 @@ from torch.utils.data import Dataset
 from ..checks import check_range
 from ..errors import InputError, PathLike
 from ..io.atomic import atomic_path
-from ..io.images import load_image, resize_image, save_image
+from ..io.images import load_image, resize_image, save_image, to_uint8
 from .photos import TRAIN_PHOTOS, PhotoAugment, augmented_photo, load_photo
 from .textures import TEXTURE_KINDS, make_texture
 
@@ -76,7 +76,7 @@ def make_painting(photo: np.ndarray, style_index: int, size: Tuple[int, int], wo
     h, w = photo.shape[:2]
     s = work_size / max(h, w)
     work = resize_image(np.asarray(photo, np.float32), (max(32, round(h * s)), max(32, round(w * s))))
-    u8 = np.clip(np.rint(work * 255.0), 0, 255).astype(np.uint8)
+    u8 = to_uint8(work)
     painted = np.asarray(_engine().stylize(u8, style=int(style_index), max_size=None), np.float32) / 255.0
     return resize_image(painted, size)
 
@@ -173,7 +173,7 @@ class StyleBank(Dataset):
                             and not p.name.startswith("."))
         if not self.files:
             raise InputError(self.root, f"no style images ({', '.join(STYLE_EXTENSIONS)}) in the folder")
-        self._images = [np.clip(np.rint(load_image(p, max_size=max_size).rgb * 255.0), 0, 255).astype(np.uint8)
+        self._images = [to_uint8(load_image(p, max_size=max_size).rgb)
                         for p in self.files]
 
     def __len__(self) -> int:
