@@ -194,7 +194,8 @@ def _nanmean(values: List[float]) -> float:
     return float(np.mean(finite)) if finite else math.nan
 
 
-def _summary(records: List[ViewRecord], n_samples: int) -> Optional[KindScores]:
+def summarize_views(records: List[ViewRecord], n_samples: int) -> Optional[KindScores]:
+    """Means over views of scored records (NaN regions skipped); None for no records."""
     if not records:
         return None
     col = {f: [getattr(r, f) for r in records] for f in ViewRecord._fields[3:]}
@@ -242,7 +243,7 @@ def evaluate_view_synthesis(
         model.train(was_training)
     by_kind = {k: [r for r in records if r.kind == k] for k in KINDS}
     return ViewSynthesisResult(
-        procedural=_summary(by_kind["procedural"], counts["procedural"]),
-        ldi=_summary(by_kind["ldi"], counts["ldi"]),
+        procedural=summarize_views(by_kind["procedural"], counts["procedural"]),
+        ldi=summarize_views(by_kind["ldi"], counts["ldi"]),
         views=tuple(records),
     )
