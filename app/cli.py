@@ -84,6 +84,8 @@ def _add_training(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--styles", default=d.styles_dir, help=f"style bank for stage 2 (default {d.styles_dir})")
     p.add_argument("--out", default=d.out_dir, help=f"run folder (default {d.out_dir})")
     p.add_argument("--init", default=None, help="checkpoint to start from (stage 2: the stage-1 model)")
+    p.add_argument("--init-stylizer", default=None,
+                   help="stage 2: take the stylizer's initial weights from this checkpoint (an earlier stage-2 run)")
     p.add_argument("--iterations", type=int, default=d.iterations, help=f"total steps (default {d.iterations})")
     p.add_argument("--batch-size", type=int, default=d.batch_size, help=f"samples per step (default {d.batch_size})")
     p.add_argument("--lr", type=float, default=d.lr, help=f"Adam learning rate (default {d.lr:g})")
@@ -131,7 +133,8 @@ def _train(args: argparse.Namespace) -> int:
         stage=args.stage, model=args.config, data_dir=args.data, styles_dir=args.styles, out_dir=args.out,
         iterations=args.iterations, batch_size=args.batch_size, lr=args.lr, lr_schedule=args.lr_schedule,
         checkpoint_every=args.checkpoint_every, log_every=args.log_every,
-        max_hours=args.hours, init=args.init, seed=args.seed, threads=args.threads,
+        max_hours=args.hours, init=args.init, init_stylizer=args.init_stylizer, seed=args.seed,
+        threads=args.threads,
     )
     path = train(config, log=lambda msg: print(f"{PROG}: {msg}", file=sys.stderr, flush=True))
     print(f"{PROG}: checkpoint {path}", file=sys.stderr)

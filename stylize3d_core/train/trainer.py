@@ -104,6 +104,9 @@ class TrainConfig:
         log_every: log losses every this many steps.
         max_hours: stop (after checkpointing) once this much wall time has passed; None = no limit.
         init: checkpoint to start from (stage 2: the stage-1 model).
+        init_stylizer: stage 2, a checkpoint whose stylizer weights replace the
+            initial ones (e.g. an earlier stage-2 run, when the encoder has only been
+            trained further since); ignored when the run resumes.
         seed: base seed (sample order, style choice, consistency points).
         threads: torch CPU threads (None: torch's default).
     """
@@ -124,6 +127,7 @@ class TrainConfig:
     log_every: int = 10
     max_hours: Optional[float] = None
     init: Optional[str] = None
+    init_stylizer: Optional[str] = None
     seed: int = 0
     threads: Optional[int] = None
 
@@ -137,6 +141,8 @@ class TrainConfig:
         if self.lr_schedule not in LR_SCHEDULES:
             raise InputError("lr_schedule", f"must be one of {', '.join(LR_SCHEDULES)}, got {self.lr_schedule!r}")
         check_range(self.recon_fraction, "recon_fraction", 0.0, 1.0)
+        if self.init_stylizer is not None and self.stage != 2:
+            raise InputError("init_stylizer", "only stage 2 trains the stylizer")
         if self.max_hours is not None:
             check_range(self.max_hours, "max_hours", 0.0, 1e4, inclusive=False)
 
@@ -261,6 +267,12 @@ def train(config: TrainConfig, log: Log = print) -> Path:
         state = None
     if model.config.name != config.model:
         raise InputError("model", f"the checkpoint is a {model.config.name!r} model, not {config.model!r}")
+    if state is None and config.init_stylizer is not None:
+        donor = load_checkpoint(config.init_stylizer).model
+        if donor.config != model.config:
+            raise InputError(config.init_stylizer, "its model configuration differs from the one being trained")
+        model.stylizer.load_state_dict(donor.stylizer.state_dict())
+        log(f"stylizer weights from {config.init_stylizer}")
     model.to(device).train()
 
     if config.stage == 2:

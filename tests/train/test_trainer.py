@@ -6,7 +6,7 @@ import torch
 
 from stylize3d_core.errors import InputError
 from stylize3d_core.io.images import save_image
-from stylize3d_core.models.checkpoint import load_checkpoint
+from stylize3d_core.models.checkpoint import load_checkpoint, save_checkpoint
 from stylize3d_core.train.cache import build_dataset
 from stylize3d_core.train.data import DataConfig
 from stylize3d_core.train.trainer import TrainConfig, learning_rate, train
@@ -89,6 +89,31 @@ def test_cosine_run_logs_the_rate_and_resumes_on_the_curve(data, tmp_path):
     log = _log(out, 1)
     assert [r["iteration"] for r in log] == [1, 2, 3, 4]
     assert [r["lr"] for r in log] == pytest.approx([learning_rate(cfg, i) for i in range(4)])
+
+
+def test_stage2_can_take_the_stylizer_from_another_checkpoint(data, tmp_path):
+    out = tmp_path / "run"
+    train(TrainConfig(stage=1, data_dir=str(data / "train"), out_dir=str(out), iterations=1, batch_size=1,
+                      threads=1), log=lambda _: None)
+    stage1 = load_checkpoint(out / "model_stage1.safetensors").model
+    donor = load_checkpoint(out / "model_stage1.safetensors").model
+    torch.manual_seed(3)
+    for p in donor.stylizer.parameters():
+        p.data.normal_()
+    donor_path = tmp_path / "donor.safetensors"
+    save_checkpoint(donor_path, donor, 2, {})
+    messages = []
+    train(TrainConfig(stage=2, data_dir=str(data / "train"), styles_dir=str(data / "styles"), out_dir=str(out),
+                      iterations=1, batch_size=1, lr=1e-12, recon_fraction=0.0, threads=1,
+                      init_stylizer=str(donor_path)), log=messages.append)
+    assert any("stylizer weights from" in m for m in messages)
+    after = load_checkpoint(out / "model_stage2.safetensors").model
+    for (k, a), (_, b) in zip(donor.stylizer.state_dict().items(), after.stylizer.state_dict().items()):
+        assert torch.allclose(a.float(), b.float(), atol=1e-6), f"stylizer weight {k} not taken from the donor"
+    for (k, a), (_, b) in zip(stage1.encoder.state_dict().items(), after.encoder.state_dict().items()):
+        assert torch.equal(a, b), f"encoder weight {k} not the stage-1 one"
+    with pytest.raises(InputError, match="stage 2"):
+        TrainConfig(stage=1, init_stylizer=str(donor_path))
 
 
 def test_bad_settings(data, tmp_path):
