@@ -13,6 +13,7 @@ import argparse
 import sys
 from typing import List, Optional, get_args
 
+from stylize3d_core.depth.refine import REFINE_METHODS
 from stylize3d_core.errors import ExportError, InputError, Stylize3DError
 from stylize3d_core.geometry.trajectories import TrajectoryName
 from stylize3d_core.io.video import ExportCancelled, console_progress
@@ -42,6 +43,9 @@ def _add_render(sub: "argparse._SubParsersAction") -> None:
                    help="depth source: auto (default: phone depth, else the built-in prior), prior, "
                         "a depth file (PNG16/NPY/PFM/TIFF/EXR; append :disparity for disparity), "
                         "onnx:MODEL.onnx, stereo:RIGHT_IMAGE, stereo:sbs")
+    p.add_argument("--refine-depth", default=None, choices=REFINE_METHODS, metavar="METHOD",
+                   help="align depth edges with the photo's edges first: bilateral_median (sharpens, as "
+                        "3DPhoto), joint_bilateral or guided (smooth); default: no refinement")
     p.add_argument("--trajectory", default=d.trajectory, choices=get_args(TrajectoryName),
                    help=f"camera path shape (default {d.trajectory})")
     p.add_argument("--frames", type=int, default=d.frames, help=f"number of frames (default {d.frames})")
@@ -143,7 +147,8 @@ def _train(args: argparse.Namespace) -> int:
 
 def _render(args: argparse.Namespace) -> int:
     job = RenderJob(
-        photo=args.photo, output=args.output, depth=args.depth, trajectory=args.trajectory,
+        photo=args.photo, output=args.output, depth=args.depth, refine_depth=args.refine_depth,
+        trajectory=args.trajectory,
         frames=args.frames, fps=args.fps, size=args.size, max_size=args.max_size, fov=args.fov,
         supersample=args.supersample, camera_path=args.camera_path,
         save_camera_path=args.save_camera_path, save_ply=args.save_ply, style=args.style,

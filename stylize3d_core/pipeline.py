@@ -42,6 +42,9 @@ class RenderJob:
         depth: where depth comes from (see ``stylize3d_core.depth.sources``):
             "auto" (default: depth embedded by the phone, else the built-in prior),
             "prior", a depth file, "onnx:MODEL.onnx", "stereo:RIGHT".
+        refine_depth: align the depth's edges with the photo's before building the
+            LDI: None (default), "bilateral_median" (3DPhoto's; sharpens edges),
+            "joint_bilateral" or "guided" (smooth); see ``depth/refine.py``.
         trajectory: camera path shape (see ``geometry/trajectories.py``). Default "circle".
         frames: number of frames. Default 90 (3 s at 30 fps, as the paper's code).
         fps: frames per second of the video. Default 30.
@@ -62,6 +65,7 @@ class RenderJob:
     photo: str
     output: str = "out.mp4"
     depth: str = "auto"
+    refine_depth: Optional[str] = None
     trajectory: TrajectoryName = "circle"
     frames: int = 90
     fps: float = 30.0
@@ -90,14 +94,17 @@ class RenderResult(NamedTuple):
 
 def load_photo3d(
     photo: str, depth: str = "auto", *, max_size: int = 1024, fov: Optional[float] = None,
-    ldi: LDISettings = LDISettings(), log: Log = _quiet,
+    ldi: LDISettings = LDISettings(), refine_depth: Optional[str] = None, log: Log = _quiet,
 ) -> Photo3D:
-    """Read ``photo``, get its depth from the source ``depth`` names, and build the 3D photo."""
-    from .depth.sources import parse_depth_spec  # the depth package is heavier (onnxruntime)
+    """Read ``photo``, get its depth from the source ``depth`` names (edges aligned with the
+    photo's by the ``refine_depth`` method, if given), and build the 3D photo."""
+    from .depth.refine import RefineSettings  # the depth package is heavier (onnxruntime)
+    from .depth.sources import parse_depth_spec
 
+    refine = None if refine_depth is None else RefineSettings(method=refine_depth)
     t0 = time.perf_counter()
     image = load_image(photo, max_size=max_size)
-    source = parse_depth_spec(depth)
+    source = parse_depth_spec(depth, refine=refine)
     t1 = time.perf_counter()
     rgb = source.photo_view(image.rgb)  # the left half of a side-by-side stereo card, else the photo
     depth_map = source.estimate(image.rgb, photo_path=photo)
@@ -151,7 +158,8 @@ def run_render(job: RenderJob, *, progress: Optional[Progress] = None, log: Log 
     if job.supersample not in (1, 2):
         raise InputError("supersample", f"must be 1 or 2, got {job.supersample!r}")
     style_inputs = _check_style_inputs(job) if job.style is not None else None
-    p3d = load_photo3d(job.photo, job.depth, max_size=job.max_size, fov=job.fov, ldi=job.ldi, log=log)
+    p3d = load_photo3d(job.photo, job.depth, max_size=job.max_size, fov=job.fov, ldi=job.ldi,
+                      refine_depth=job.refine_depth, log=log)
     timings = dict(p3d.timings)
     cameras, fps = job_cameras(job, p3d.fov_y_deg)
     H, W = frame_size(p3d.size, job.size)

@@ -56,6 +56,20 @@ def test_stylized_render(photo, tmp_path):
     assert iio.imread(out).shape[0] == 2
 
 
+def test_refine_depth_changes_the_geometry(photo, tmp_path, capsys):
+    plain, refined = tmp_path / "plain.ply", tmp_path / "refined.ply"
+    common = ["render", str(photo), "--frames", "2", "--size", "48", "-q"]
+    assert main(common + ["-o", str(tmp_path / "a.mp4"), "--save-ply", str(plain)]) == 0
+    assert main(common + ["-o", str(tmp_path / "b.mp4"), "--save-ply", str(refined),
+                          "--refine-depth", "bilateral_median"]) == 0
+    a, b = read_ply(plain), read_ply(refined)
+    assert a.xyz.shape[1] == b.xyz.shape[1] == 3
+    assert a.xyz.shape != b.xyz.shape or not np.allclose(a.xyz, b.xyz)
+    with pytest.raises(SystemExit) as e:  # argparse's own usage error
+        main(common + ["--refine-depth", "median"])
+    assert e.value.code == 2 and "median" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("args, needle", [
     (["render", "{missing}"], "not found"),
     (["render", "{photo}", "--depth", "{missing}"], "missing.png"),
