@@ -66,7 +66,7 @@ def _add_render(sub: "argparse._SubParsersAction") -> None:
 
 
 def _add_training(sub: "argparse._SubParsersAction") -> None:
-    from stylize3d_core.train.trainer import TrainConfig
+    from stylize3d_core.train.trainer import LR_SCHEDULES, TrainConfig
 
     d = TrainConfig()
     p = sub.add_parser("prepare-data", help="generate training samples (pseudo views and procedural scenes)")
@@ -93,7 +93,7 @@ def _add_training(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--iterations", type=int, default=d.iterations, help=f"total steps (default {d.iterations})")
     p.add_argument("--batch-size", type=int, default=d.batch_size, help=f"samples per step (default {d.batch_size})")
     p.add_argument("--lr", type=float, default=d.lr, help=f"Adam learning rate (default {d.lr:g})")
-    p.add_argument("--lr-schedule", choices=("constant", "cosine"), default=d.lr_schedule,
+    p.add_argument("--lr-schedule", choices=LR_SCHEDULES, default=d.lr_schedule,
                    help="constant, or cosine decay to 0 at --iterations (default constant)")
     p.add_argument("--hours", type=float, default=None, help="stop (with a checkpoint) after this many hours")
     p.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every)
