@@ -1,6 +1,7 @@
 """``stylize3d-viewer``: the interactive desktop viewer (Open3D GUI).
 
-    stylize3d-viewer [PHOTO] [--style STYLE] [--depth SPEC] [--model CHECKPOINT | --no-model]
+    stylize3d-viewer [PHOTO] [--style STYLE] [--depth SPEC] [--refine-depth METHOD]
+                     [--model CHECKPOINT | --no-model]
                      [--max-size 640] [--fov DEG] [--strength 0.8] [--threads 1] [--size 1280x800]
                      [--test-script steps.json --test-report report.json]
 
@@ -17,6 +18,8 @@ import argparse
 import sys
 from typing import List, Optional
 
+from stylize3d_core.depth.refine import REFINE_METHODS
+
 from .session import DEFAULT_MODEL
 
 PROG = "stylize3d-viewer"
@@ -32,6 +35,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--depth", default="auto", metavar="SPEC",
                    help="depth source: auto (default), prior, phone, a depth file (append :disparity for "
                         "disparity), onnx:MODEL.onnx, stereo:RIGHT_IMAGE, stereo:sbs")
+    p.add_argument("--refine-depth", default=None, choices=REFINE_METHODS, metavar="METHOD",
+                   help="align depth edges with the photo's: bilateral_median, joint_bilateral or guided")
     models = p.add_mutually_exclusive_group()
     models.add_argument("--model", default=None, metavar="CHECKPOINT",
                         help=f"model checkpoint (.safetensors); default {DEFAULT_MODEL.relative_to(DEFAULT_MODEL.parents[2])} "
@@ -76,7 +81,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     app = gui.Application.instance
     app.initialize()
     viewer = ViewerWindow(ViewerOptions(
-        photo=args.photo, style=args.style, depth=args.depth, model=args.model, use_model=not args.no_model,
+        photo=args.photo, style=args.style, depth=args.depth, refine_depth=args.refine_depth, model=args.model, use_model=not args.no_model,
         max_size=args.max_size,
         fov=args.fov, strength=args.strength, width=width, height=height))
     runner = None

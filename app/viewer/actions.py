@@ -65,7 +65,8 @@ class WindowActions:
         s = self.state
         self._set_busy(f"Building the 3D photo of {os.path.basename(path)} ...", 0.1)
         self.worker.submit(
-            "open photo", lambda: self.session.load_photo(path, depth, max_size=s.max_size, fov=s.photo_fov),
+            "open photo", lambda: self.session.load_photo(path, depth, max_size=s.max_size, fov=s.photo_fov,
+                                                          refine_depth=s.refine_depth),
             on_done=lambda info: self._post(lambda: self._on_photo_loaded(info, depth)),
             on_error=lambda name, e: self._post(lambda: self._on_task_failed(name, e)), key="photo")
 
@@ -143,6 +144,18 @@ class WindowActions:
     @ui_callback
     def _on_open_depth(self) -> None:
         self._file_dialog(gui.FileDialog.OPEN, "Open depth or disparity file", DEPTH_FILTERS, self._set_depth)
+
+    @ui_callback
+    def _on_refine_choice(self, text: str, index: int) -> None:
+        self.set_refine_depth(P.REFINE_CHOICES[index][0])
+
+    def set_refine_depth(self, method: Optional[str]) -> None:
+        """Choose the depth-edge alignment (None: none) and rebuild the open photo with it."""
+        self.state = replace(self.state, refine_depth=method)
+        if self.state.photo is None:
+            self._set_status(f"Depth edges: {method or 'as estimated'}")
+        else:
+            self.open_photo(self.state.photo)
 
     def _set_depth(self, spec: str) -> None:
         if self.state.photo is None:

@@ -7,7 +7,7 @@ theme's font size), so the layout follows the UI scale.
 
 from __future__ import annotations
 
-from typing import List, Tuple, get_args
+from typing import List, Optional, Tuple, get_args
 
 import open3d.visualization.gui as gui
 
@@ -22,6 +22,14 @@ DEPTH_CHOICES: Tuple[Tuple[str, str], ...] = (
     ("stereo:sbs", "side-by-side stereo card"),
 )
 """Depth sources offered in the picker: (spec, label). A depth file is chosen with "Depth file..."."""
+
+REFINE_CHOICES: Tuple[Tuple[Optional[str], str], ...] = (
+    (None, "depth edges as estimated"),
+    ("bilateral_median", "align edges to the photo (sharp)"),
+    ("joint_bilateral", "align edges (smooth, joint bilateral)"),
+    ("guided", "align edges (smooth, guided filter)"),
+)
+"""Depth-edge alignment offered in the picker: (``refine_depth`` value, label)."""
 
 EXPORT_FORMATS: Tuple[Tuple[str, str], ...] = (("mp4", "MP4 video"), ("gif", "GIF animation"), ("png", "PNG frames"))
 
@@ -125,6 +133,10 @@ class Panel:
         photo.add_child(gui.Label("Depth"))
         photo.add_child(self.depth)
         photo.add_child(self.depth_file)
+        self.refine = gui.Combobox()
+        for _, label in REFINE_CHOICES:
+            self.refine.add_item(label)
+        photo.add_child(self.refine)
         self.open_style = gui.Button("Open style...")
         photo.add_child(self.open_style)
         self.style_label = gui.Label("no style")

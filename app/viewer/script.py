@@ -37,10 +37,11 @@ import time
 import traceback
 from dataclasses import asdict, replace
 from pathlib import Path
-from typing import Any, Callable, Dict, List
+from typing import Any, Callable, Dict, List, Optional
 
 from stylize3d_core.errors import InputError
 
+from . import panel as P
 from .state import ExportSettings
 from .window import ViewerWindow
 
@@ -195,6 +196,16 @@ class ScriptRunner:
 
     def op_set_stylized(self, value: bool) -> None:
         self.main(lambda: self.window.set_stylized(bool(value)))
+
+    def op_set_refine_depth(self, value: Optional[str] = None) -> None:
+        """Pick the depth-edge alignment in the panel's picker, as a user would."""
+        index = [v for v, _ in P.REFINE_CHOICES].index(value)
+
+        def pick() -> None:
+            self.window.panel.refine.selected_index = index
+            self.window._on_refine_choice(P.REFINE_CHOICES[index][1], index)
+
+        self.main(pick)
 
     def op_set_export(self, **fields: Any) -> Dict[str, Any]:
         def apply() -> Dict[str, Any]:

@@ -180,10 +180,12 @@ class ViewerSession:
         return self._stylized is not None
 
     # -- photo --------------------------------------------------------------------
-    def load_photo(self, path: str, depth: str = "auto", *, max_size: int = 640, fov: Optional[float] = None) -> PhotoInfo:
-        """Build the 3D photo of ``path``; on any error the current photo stays loaded."""
+    def load_photo(self, path: str, depth: str = "auto", *, max_size: int = 640, fov: Optional[float] = None,
+                   refine_depth: Optional[str] = None) -> PhotoInfo:
+        """Build the 3D photo of ``path`` (depth edges aligned by ``refine_depth``, if given);
+        on any error the current photo stays loaded."""
         t0 = time.perf_counter()
-        photo = load_photo3d(str(path), depth, max_size=max_size, fov=fov)
+        photo = load_photo3d(str(path), depth, max_size=max_size, fov=fov, refine_depth=refine_depth)
         ldi = photo.ldi
         scene = OrbitScene.from_depths(ldi.depth[ldi.photo_region])
         cloud = shuffled_points(photo.points, self.settings.seed)

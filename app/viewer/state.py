@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Literal, Optional, Tuple, get_args
 
 from stylize3d_core.checks import check_choice, check_range
+from stylize3d_core.depth.refine import REFINE_METHODS
 from stylize3d_core.errors import InputError
 from stylize3d_core.geometry.camera import Cameras, check_fov
 from stylize3d_core.geometry.trajectories import TrajectoryName, TrajectorySettings, make_trajectory
@@ -98,6 +99,8 @@ class ViewState:
         photo: path of the photo, or None before one is opened.
         style: path of the style image, or None.
         depth: depth source spec (see ``stylize3d_core.depth.sources``). Default "auto".
+        refine_depth: align the depth's edges with the photo's first: None (default),
+            "bilateral_median", "joint_bilateral" or "guided" (``stylize3d_core.depth.refine``).
         model: checkpoint path, or None for the default ``assets/model/stylize3d_lite.safetensors``.
         max_size: long side the photo is shrunk to before building the 3D photo. Default 640.
         photo_fov: vertical FOV of the photo in degrees; None = from EXIF, else 60.
@@ -113,6 +116,7 @@ class ViewState:
     photo: Optional[str] = None
     style: Optional[str] = None
     depth: str = "auto"
+    refine_depth: Optional[str] = None
     model: Optional[str] = None
     max_size: int = 640
     photo_fov: Optional[float] = None
@@ -132,6 +136,8 @@ class ViewState:
             check_fov(self.photo_fov, "photo fov")
         check_range(self.max_size, "max_size", 32, 8192)
         check_choice(self.trajectory.name, "trajectory", get_args(TrajectoryName))
+        if self.refine_depth is not None:
+            check_choice(self.refine_depth, "refine_depth", REFINE_METHODS)
 
 
 def view_fov(state: ViewState, photo_fov_deg: float) -> float:

@@ -54,6 +54,7 @@ class ViewerOptions:
     photo: Optional[str] = None
     style: Optional[str] = None
     depth: str = "auto"
+    refine_depth: Optional[str] = None
     model: Optional[str] = None
     use_model: bool = True
     max_size: int = 640
@@ -74,7 +75,7 @@ class ViewerWindow(WindowActions):
         self.app = gui.Application.instance
         self._main_ident = threading.get_ident()
         self.options = options
-        self.state = ViewState(depth=options.depth, model=options.model, max_size=options.max_size,
+        self.state = ViewState(depth=options.depth, refine_depth=options.refine_depth, model=options.model, max_size=options.max_size,
                                photo_fov=options.fov, strength=options.strength)
         self.limits = OrbitLimits()
         self.preview = PreviewSettings()
@@ -127,6 +128,7 @@ class ViewerWindow(WindowActions):
         p.open_style.set_on_clicked(self._on_open_style)
         p.depth.set_on_selection_changed(self._on_depth_choice)
         p.depth_file.set_on_clicked(self._on_open_depth)
+        p.refine.set_on_selection_changed(self._on_refine_choice)
         p.stylized.set_on_clicked(self._on_stylized)
         p.strength.set_on_value_changed(self._on_strength)
         p.fov.set_on_value_changed(self._on_fov)

@@ -217,6 +217,9 @@ def test_stylized_view_strength_style_export_and_no_freeze(display, tmp_path, un
         {"op": "set_stylized", "value": False},
         {"op": "wait_idle", "timeout": 120},
         {"op": "screenshot", "path": str(tmp_path / "original.png")},
+        {"op": "set_refine_depth", "value": "bilateral_median"},
+        {"op": "wait_idle", "timeout": 120},
+        {"op": "state"},
         {"op": "quit"},
     ]
     code, report = run_viewer(display, tmp_path, steps, ["--model", str(untrained)])
@@ -236,6 +239,8 @@ def test_stylized_view_strength_style_export_and_no_freeze(display, tmp_path, un
     assert np.any(pixels(tmp_path / "other_style.png") != pixels(tmp_path / "weak.png")), "the style did not change"
     assert np.abs(original - moved).mean() > 10, "stylized and original views look the same"
     assert original.std() > 20
+    state = step(report, "state")["result"]
+    assert state["refine_depth"] == "bilateral_median" and state["photo"].endswith("coffee.jpg")
 
 
 def _xtest():

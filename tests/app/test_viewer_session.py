@@ -67,6 +67,19 @@ def test_plain_view_is_the_photo_and_orbit_shows_parallax(plain):
     assert np.abs(moved - img).mean() > 0.02
 
 
+def test_refined_depth_rebuilds_the_photo_with_aligned_edges(plain):
+    s = ViewerSession(model=None)
+    s.load_photo(str(SAMPLE_PHOTO), "prior", max_size=MAX_SIZE, refine_depth="bilateral_median")
+    assert s.info.size == plain.info.size
+    assert "prior" in s.photo.depth.source
+    refined, raw = s.photo.depth.depth, plain.photo.depth.depth
+    assert refined.shape == raw.shape and np.isfinite(refined).all()
+    assert not np.allclose(refined, raw)  # the edges moved
+    with pytest.raises(InputError, match="refine method"):
+        s.load_photo(str(SAMPLE_PHOTO), "prior", max_size=MAX_SIZE, refine_depth="median")
+    assert s.photo.depth.depth is refined  # the failed load kept the refined photo
+
+
 def test_preview_renders_a_point_subset(plain):
     assert preview_point_count(10**6, 100, 100, 2.0) == 20480  # 2 * 100 * 100 rounded up to 4096
     assert preview_point_count(1000, 100, 100, 2.0) == 1000

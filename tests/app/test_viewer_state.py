@@ -27,6 +27,9 @@ def test_defaults_are_valid_and_bad_values_refused():
         ViewState(trajectory=TrajectorySettings(name="spiral"))
     with pytest.raises(InputError, match="view fov"):
         ViewState(view_fov=0.0)
+    assert s.refine_depth is None and ViewState(refine_depth="guided").refine_depth == "guided"
+    with pytest.raises(InputError, match="refine_depth"):
+        ViewState(refine_depth="median")
 
 
 @pytest.mark.parametrize("kwargs, match", [
