@@ -31,22 +31,16 @@ sys.path.insert(0, str(ROOT))
 from stylize3d_core.eval.view_synthesis import (  # noqa: E402
     KindScores, ViewRecord, evaluate_view_synthesis, score_views, summarize_views,
 )
-from stylize3d_core.render.holes import fill_holes  # noqa: E402
-from stylize3d_core.render.rasterize import RasterSettings  # noqa: E402
-from stylize3d_core.render.rasterizer import PointRasterizer  # noqa: E402
+from stylize3d_core.render.plain import PlainRenderer  # noqa: E402
 from stylize3d_core.train.cache import TrainDataset  # noqa: E402
 
 
 def plain_views(sample) -> torch.Tensor:
     """(V, 3, H, W) plain renders of the sample's points at its target cameras."""
     h, w = sample.image_size
-    raster = PointRasterizer(RasterSettings(height=h, width=w))
-    views = []
-    with torch.inference_mode():
-        for v in range(len(sample.cameras)):
-            frags = raster(sample.points.xyz.float(), sample.points.rgb.float(), sample.cameras[v])
-            views.append(fill_holes(frags.image, frags.hole).clamp(0.0, 1.0))
-    return torch.stack(views)
+    renderer = PlainRenderer(sample.points)
+    frames = renderer.frames(sample.cameras, h, w)  # (H, W, 3) each
+    return torch.stack([torch.from_numpy(f).permute(2, 0, 1) for f in frames])
 
 
 def plain_scores(data: TrainDataset, n: int):

@@ -36,6 +36,7 @@ from .models.adaattn import blend
 from .models.checkpoint import Checkpoint, load_checkpoint
 from .models.style_features import StyleEncoder
 from .models.stylize3d import Stylize3DModel, prepare_geometry
+from .render.plain import preview_point_count, random_order
 from .scene.photo3d import Photo3D
 
 
@@ -102,8 +103,7 @@ class Stylized3DPhoto:
             t1 = time.perf_counter()
             self._content = self.model.encode(self._geom)  # (M, C)
         t2 = time.perf_counter()
-        g = torch.Generator().manual_seed(settings.seed)
-        self._order = torch.randperm(self._geom.xyz.shape[0], generator=g)  # (N,)
+        self._order = random_order(self._geom.xyz.shape[0], settings.seed)  # (N,)
         self._xyz = self._geom.xyz.index_select(0, self._order).contiguous()  # (N, 3), random order
         self._stylized: Optional[torch.Tensor] = None  # (M, C) at strength 1
         self._dense: Optional[torch.Tensor] = None  # (N, Cr) in self._order
@@ -161,7 +161,7 @@ class Stylized3DPhoto:
             self._update_dense()
         n = self.num_points
         if preview:
-            keep = int(min(n, max(1024, self.settings.preview_points_per_pixel * height * width)))
+            keep = preview_point_count(n, height, width, self.settings.preview_points_per_pixel)
             ss = 1
         else:
             keep, ss = n, self.settings.supersample

@@ -4,15 +4,15 @@
 window runs its methods as :class:`~app.viewer.worker.ComputeWorker` tasks and
 renders. It keeps everything that does not depend on the camera:
 
-* the 3D photo and a plain renderer over its points in a fixed random order, so
-  a preview renders a *prefix* of them (about ``preview_points_per_pixel`` per
-  output pixel) without copying;
+* the 3D photo and its :class:`~stylize3d_core.render.plain.PlainRenderer`
+  (previews rasterize a random subset of the points, see ``render/plain.py``);
 * when a model checkpoint is available, a :class:`~stylize3d_core.stylize.Stylized3DPhoto`
   holding the encoded point cloud: a new style re-uses it (no re-encoding), a
   new strength only re-blends.
 
-Until a trained model ships (``assets/model/stylize3d_lite.safetensors``), the
-session renders the plain 3D photo and says so (:data:`NO_MODEL`).
+Without a checkpoint (none given, the shipped ``assets/model/stylize3d_lite.safetensors``
+missing, or ``use_model=False``) the session renders the plain 3D photo and says
+so (:data:`NO_MODEL`).
 
 Everything that fails keeps what was there before: a photo that cannot be read
 leaves the current photo loaded, a style that cannot be read the current style.
@@ -23,7 +23,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Dict, NamedTuple, Optional, Tuple
+from typing import Callable, NamedTuple, Optional, Tuple
 
 import cv2
 import numpy as np
@@ -33,34 +33,19 @@ from stylize3d_core.geometry.camera import Cameras
 from stylize3d_core.io.images import load_image, to_uint8
 from stylize3d_core.io.video import Progress, write_video
 from stylize3d_core.pipeline import load_photo3d
-from stylize3d_core.render.plain import PlainRenderer
+from stylize3d_core.render.plain import PlainRenderer, PlainRenderSettings
 from stylize3d_core.scene.photo3d import Photo3D
-from stylize3d_core.scene.pointcloud import PointCloud
 
 from .orbit import OrbitScene
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_MODEL = REPO_ROOT / "assets" / "model" / "stylize3d_lite.safetensors"
-"""Where the trained checkpoint lives once it ships."""
+"""The shipped trained checkpoint."""
 SAMPLE_PHOTO = REPO_ROOT / "assets" / "samples" / "coffee.jpg"
 SAMPLE_STYLE = REPO_ROOT / "assets" / "styles" / "painting_style19_chelsea.jpg"
 NO_MODEL = "no trained model: showing the plain 3D photo"
 STYLE_MAX_SIZE = 512
 """Style images are read with their long side shrunk to this (the style encoder's own cap)."""
-
-
-@dataclass(frozen=True)
-class SessionSettings:
-    """Options of :class:`ViewerSession`.
-
-    Attributes:
-        preview_points_per_pixel: points a plain preview rasterizes per output pixel. Default 2
-            (holes left by the subset are filled by the renderer's hole filling).
-        seed: seed of the random point order.
-    """
-
-    preview_points_per_pixel: float = 2.0
-    seed: int = 0
 
 
 class PhotoInfo(NamedTuple):
@@ -120,36 +105,22 @@ def display_image(rgb: np.ndarray, display_hw: Tuple[int, int]) -> np.ndarray:
     return np.ascontiguousarray(u8)
 
 
-def shuffled_points(points: PointCloud, seed: int) -> PointCloud:
-    """The same points in a fixed random order (any prefix is a uniform random subset)."""
-    order = np.random.default_rng(seed).permutation(len(points))  # (N,)
-    return PointCloud(points.xyz[order], points.rgb[order], points.label[order], points.image_size, points.fov_y_deg)
-
-
-def preview_point_count(n_points: int, height: int, width: int, per_pixel: float) -> int:
-    """Points a preview of (H, W) rasterizes: ``per_pixel * H * W``, rounded up to 4096, at most all."""
-    want = int(np.ceil(per_pixel * height * width / 4096.0)) * 4096
-    return int(min(n_points, max(4096, want)))
-
-
 class ViewerSession:
     """The loaded 3D photo, renderers, model and style (see the module docstring).
 
     Thread use: not thread-safe; every method runs on the compute worker's thread.
     """
 
-    def __init__(self, model: Optional[str] = None, settings: SessionSettings = SessionSettings(), *,
+    def __init__(self, model: Optional[str] = None, plain_settings: PlainRenderSettings = PlainRenderSettings(), *,
                  use_model: bool = True) -> None:
-        self.settings = settings
+        self.plain_settings = plain_settings
         self.use_model = use_model
         self.model_path: Optional[Path] = Path(model) if model is not None else None
         self._checkpoint = None
         self._style_encoder = None
         self.photo: Optional[Photo3D] = None
         self.info: Optional[PhotoInfo] = None
-        self._cloud: Optional[PointCloud] = None
         self._plain: Optional[PlainRenderer] = None
-        self._previews: Dict[int, PlainRenderer] = {}
         self._stylized = None  # Stylized3DPhoto
         self.style_path: Optional[str] = None
         self._style_rgb: Optional[np.ndarray] = None
@@ -188,11 +159,10 @@ class ViewerSession:
         photo = load_photo3d(str(path), depth, max_size=max_size, fov=fov, refine_depth=refine_depth)
         ldi = photo.ldi
         scene = OrbitScene.from_depths(ldi.depth[ldi.photo_region])
-        cloud = shuffled_points(photo.points, self.settings.seed)
-        plain = PlainRenderer(cloud)
+        plain = PlainRenderer(photo.points, self.plain_settings)
         # Nothing failed: replace the old photo (and drop its encoding).
-        self.photo, self._cloud, self._plain, self._previews, self._stylized = photo, cloud, plain, {}, None
-        self.info = PhotoInfo(str(path), tuple(photo.size), len(cloud), float(photo.fov_y_deg),
+        self.photo, self._plain, self._stylized = photo, plain, None
+        self.info = PhotoInfo(str(path), tuple(photo.size), plain.num_points, float(photo.fov_y_deg),
                               photo.depth.source, scene, time.perf_counter() - t0)
         return self.info
 
@@ -233,25 +203,13 @@ class ViewerSession:
         return self.strength
 
     # -- rendering ----------------------------------------------------------------
-    def _preview_renderer(self, height: int, width: int) -> PlainRenderer:
-        k = preview_point_count(len(self._cloud), height, width, self.settings.preview_points_per_pixel)
-        if k == len(self._cloud):
-            return self._plain
-        r = self._previews.get(k)
-        if r is None:
-            c = self._cloud
-            r = PlainRenderer(PointCloud(c.xyz[:k], c.rgb[:k], c.label[:k], c.image_size, c.fov_y_deg))
-            self._previews[k] = r
-        return r
-
     def render(self, camera: Cameras, height: int, width: int, *, preview: bool, stylized: bool) -> np.ndarray:
         """One view (H, W, 3) float32 in [0, 1]: through the model when ``stylized`` and available."""
         if self.photo is None:
             raise InputError("photo", "open a photo first")
         if stylized and self._stylized is not None:
             return self._stylized.render(camera, height, width, preview=preview)
-        r = self._preview_renderer(height, width) if preview else self._plain
-        return r.render(camera, height, width)
+        return self._plain.render(camera, height, width, preview=preview)
 
     def render_view(self, camera: Cameras, size: Tuple[int, int], display_hw: Tuple[int, int], *,
                     preview: bool, stylized: bool) -> ViewFrame:

@@ -3,12 +3,17 @@
 The stylized path decodes rasterized features with the model's U-Net instead;
 this path shows the photo's own colours and is the baseline the stylization is
 compared with.
+
+Previews (both paths) rasterize a *prefix* of the points held in a fixed random
+order, i.e. a uniform random subset of :func:`preview_point_count` points, with
+no copy; the hole filling (plain) or the decoder (stylized) closes the gaps.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
-from typing import Iterator, Tuple
+from typing import Iterator, Tuple, Union
 
 import numpy as np
 import torch
@@ -16,7 +21,7 @@ import torch
 from ..checks import check_range
 from ..errors import InputError
 from ..geometry.camera import Cameras
-from ..scene.pointcloud import PointCloud
+from ..scene.pointcloud import PointCloud, PointTensors
 from .holes import fill_holes
 from .rasterize import RasterSettings
 from .rasterizer import PointRasterizer
@@ -32,15 +37,35 @@ class PlainRenderSettings:
             but magnified surfaces leave pinholes that the hole filling blurs, so
             1 is the better default for the short camera moves of a 3D photo.
         depth_tolerance: relative depth band of the front surface (see RasterSettings).
+        preview_points_per_pixel: points a preview rasterizes per output pixel. Default 2.
+        seed: seed of the random point order that previews take a prefix of.
     """
 
     supersample: int = 1
     depth_tolerance: float = 0.02
+    preview_points_per_pixel: float = 2.0
+    seed: int = 0
 
     def __post_init__(self) -> None:
         if self.supersample not in (1, 2):
             raise InputError("supersample", f"must be 1 or 2, got {self.supersample!r}")
         check_range(self.depth_tolerance, "depth_tolerance", 0.0, 1.0)
+        check_range(self.preview_points_per_pixel, "preview_points_per_pixel", 0.5, 100.0)
+
+
+PREVIEW_MIN_POINTS = 1024
+"""A preview never rasterizes fewer points than this (or all of them, if fewer)."""
+
+
+def preview_point_count(n_points: int, height: int, width: int, per_pixel: float) -> int:
+    """Points a preview of (H, W) rasterizes: ``ceil(per_pixel * H * W)``, at least
+    :data:`PREVIEW_MIN_POINTS`, at most ``n_points``."""
+    return int(min(n_points, max(PREVIEW_MIN_POINTS, math.ceil(per_pixel * height * width))))
+
+
+def random_order(n_points: int, seed: int) -> torch.Tensor:
+    """A fixed random permutation (N,) of the points: any prefix of it is a uniform random subset."""
+    return torch.randperm(int(n_points), generator=torch.Generator().manual_seed(int(seed)))
 
 
 def frame_size(photo_size: Tuple[int, int], long_side: int, *, even: bool = True) -> Tuple[int, int]:
@@ -60,25 +85,36 @@ def frame_size(photo_size: Tuple[int, int], long_side: int, *, even: bool = True
 
 
 class PlainRenderer:
-    """Renders a point cloud's colours from any camera. Holds the points as tensors.
+    """Renders a point cloud's colours from any camera. Holds the points as tensors,
+    in a fixed random order (see the module docstring on previews).
 
     Runs on whatever thread calls it (torch releases the GIL in its kernels).
     """
 
-    def __init__(self, points: PointCloud, settings: PlainRenderSettings = PlainRenderSettings()) -> None:
-        t = points.to_tensors()
-        self._xyz = t.xyz  # (N, 3)
-        self._rgb = t.rgb  # (N, 3)
+    def __init__(self, points: Union[PointCloud, PointTensors],
+                 settings: PlainRenderSettings = PlainRenderSettings()) -> None:
+        t = points if isinstance(points, PointTensors) else points.to_tensors()
+        order = random_order(t.xyz.shape[0], settings.seed)
+        self._xyz = t.xyz.index_select(0, order)  # (N, 3)
+        self._rgb = t.rgb.index_select(0, order)  # (N, 3)
         self.settings = settings
 
-    def render(self, camera: Cameras, height: int, width: int) -> np.ndarray:
-        """One frame (H, W, 3) float32 in [0, 1] seen by the single camera ``camera``."""
+    @property
+    def num_points(self) -> int:
+        return int(self._xyz.shape[0])
+
+    def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False) -> np.ndarray:
+        """One frame (H, W, 3) float32 in [0, 1] seen by the single camera ``camera``;
+        ``preview`` rasterizes only :func:`preview_point_count` of the points."""
+        keep = self.num_points
+        if preview:
+            keep = preview_point_count(keep, height, width, self.settings.preview_points_per_pixel)
         raster = RasterSettings(
             height=int(height), width=int(width),
             depth_tolerance=self.settings.depth_tolerance, supersample=self.settings.supersample,
         )
         with torch.inference_mode():
-            frags = PointRasterizer(raster)(self._xyz, self._rgb, camera)
+            frags = PointRasterizer(raster)(self._xyz[:keep], self._rgb[:keep], camera)
             image = fill_holes(frags.image, frags.hole).clamp_(0.0, 1.0)  # (3, H, W), never NaN
         return image.permute(1, 2, 0).contiguous().numpy()
 

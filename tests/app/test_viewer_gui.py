@@ -67,19 +67,6 @@ def display() -> Iterator[str]:
         proc.wait(timeout=10)
 
 
-@pytest.fixture(scope="module")
-def untrained(tmp_path_factory) -> Path:
-    import torch
-
-    from stylize3d_core.models.checkpoint import save_checkpoint
-    from stylize3d_core.models.stylize3d import ModelConfig, Stylize3DModel
-
-    torch.manual_seed(0)
-    path = tmp_path_factory.mktemp("model") / "untrained.safetensors"
-    save_checkpoint(path, Stylize3DModel(ModelConfig.lite()), 1, {"note": "untrained, for tests"})
-    return path
-
-
 def run_viewer(display: str, tmp: Path, steps: List[Dict[str, Any]], args: List[str],
                during=None) -> Tuple[int, Dict[str, Any]]:
     """Run the viewer with ``steps`` in a spawn subprocess; ``during(report_path)`` runs meanwhile."""

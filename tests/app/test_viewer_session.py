@@ -8,35 +8,23 @@ hand the frame to Open3D as an ``o3d.geometry.Image``.
 from __future__ import annotations
 
 import os
-from pathlib import Path
 
 import numpy as np
 import open3d as o3d
 import pytest
-import torch
 
 import app.viewer.session as session_mod
 from app.viewer.orbit import HOME, OrbitPose, pose_camera
 from app.viewer.session import (
-    NO_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE, ExportJob, ViewerSession, display_image, preview_point_count,
+    NO_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE, ExportJob, ViewerSession, display_image,
 )
 from app.viewer.state import even_size
 from stylize3d_core.errors import InputError
 from stylize3d_core.geometry.trajectories import circle
 from stylize3d_core.io.video import ExportCancelled
-from stylize3d_core.models.checkpoint import save_checkpoint
-from stylize3d_core.models.stylize3d import ModelConfig, Stylize3DModel
+from stylize3d_core.render.plain import PREVIEW_MIN_POINTS, preview_point_count
 
 MAX_SIZE = 160
-
-
-@pytest.fixture(scope="module")
-def untrained(tmp_path_factory) -> Path:
-    """An untrained lite checkpoint (stands in for the trained model in tests)."""
-    torch.manual_seed(0)
-    path = tmp_path_factory.mktemp("model") / "untrained.safetensors"
-    save_checkpoint(path, Stylize3DModel(ModelConfig.lite()), 1, {"note": "untrained, for tests"})
-    return path
 
 
 @pytest.fixture(scope="module")
@@ -81,7 +69,8 @@ def test_refined_depth_rebuilds_the_photo_with_aligned_edges(plain):
 
 
 def test_preview_renders_a_point_subset(plain):
-    assert preview_point_count(10**6, 100, 100, 2.0) == 20480  # 2 * 100 * 100 rounded up to 4096
+    assert preview_point_count(10**6, 100, 100, 2.0) == 20000  # 2 points per output pixel
+    assert preview_point_count(10**6, 10, 10, 2.0) == PREVIEW_MIN_POINTS
     assert preview_point_count(1000, 100, 100, 2.0) == 1000
     full = render(plain, side=96)
     prev = render(plain, side=96, preview=True)
@@ -92,7 +81,7 @@ def test_preview_renders_a_point_subset(plain):
 def test_no_model_shows_the_plain_photo(monkeypatch, plain, tmp_path):
     monkeypatch.setattr(session_mod, "DEFAULT_MODEL", tmp_path / "missing.safetensors")
     s = ViewerSession(model=None)
-    s.photo, s.info, s._cloud, s._plain = plain.photo, plain.info, plain._cloud, plain._plain
+    s.photo, s.info, s._plain = plain.photo, plain.info, plain._plain
     r = s.prepare_stylized()
     assert not r.available and r.message == NO_MODEL and not s.can_stylize
     s.load_style(str(SAMPLE_STYLE))  # kept for later, no error
@@ -120,7 +109,7 @@ def test_bad_model_file_is_an_error(tmp_path, plain, name, content):
     if content is not None:
         path.write_bytes(content)
     s = ViewerSession(model=str(path))
-    s.photo, s.info, s._cloud, s._plain = plain.photo, plain.info, plain._cloud, plain._plain
+    s.photo, s.info, s._plain = plain.photo, plain.info, plain._plain
     with pytest.raises(InputError, match=name):
         s.prepare_stylized()
     assert not s.can_stylize

@@ -1,0 +1,18 @@
+"""Fixtures shared by the viewer's tests."""
+
+from pathlib import Path
+
+import pytest
+import torch
+
+from stylize3d_core.models.checkpoint import save_checkpoint
+from stylize3d_core.models.stylize3d import ModelConfig, Stylize3DModel
+
+
+@pytest.fixture(scope="module")
+def untrained(tmp_path_factory) -> Path:
+    """An untrained lite checkpoint (a model whose outputs tests can compare, not judge)."""
+    torch.manual_seed(0)
+    path = tmp_path_factory.mktemp("model") / "untrained.safetensors"
+    save_checkpoint(path, Stylize3DModel(ModelConfig.lite()), 1, {"note": "untrained, for tests"})
+    return path
