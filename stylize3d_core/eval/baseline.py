@@ -19,10 +19,10 @@ from typing import Iterable, List, Optional
 import numpy as np
 from PIL import Image
 
-from ..checks import check_range, check_shape
+from ..checks import check_range
 from ..errors import InputError
 from ..geometry.camera import Cameras
-from ..io.images import to_uint8
+from ..io.images import rgb_to_uint8
 from ..render.plain import PlainRenderer, PlainRenderSettings
 from ..scene.photo3d import Photo3D
 
@@ -44,15 +44,11 @@ def make_engine(threads: Optional[int] = None):
     return StyleTransfer(device="cpu", threads=threads)
 
 
-def to_u8(image: np.ndarray, name: str) -> np.ndarray:
-    """(H, W, 3) float image in [0, 1] -> uint8 (validated; values are clipped to [0, 1])."""
-    check_shape(image, name, (None, None, 3))
-    arr = np.asarray(image)
-    if not np.issubdtype(arr.dtype, np.floating):
-        raise InputError(name, f"expected a float image in [0, 1], got {arr.dtype}")
-    if not np.isfinite(arr).all():
-        raise InputError(name, "contains NaN or infinite values")
-    return to_uint8(arr)
+def _float_rgb_to_uint8(image: np.ndarray, name: str) -> np.ndarray:
+    """A float (H, W, 3) image in [0, 1] as uint8; anything else is an InputError naming ``name``."""
+    if not np.issubdtype(np.asarray(image).dtype, np.floating):
+        raise InputError(name, f"expected a float image in [0, 1], got {np.asarray(image).dtype}")
+    return rgb_to_uint8(image, name)
 
 
 def stylize_frames_2d(
@@ -67,13 +63,13 @@ def stylize_frames_2d(
         engine: a :func:`make_engine` engine to reuse (built if None).
     """
     strength = check_range(strength, "strength", 0.0, 1.0)
-    style = Image.fromarray(to_u8(style_rgb, "style image"))
+    style = Image.fromarray(_float_rgb_to_uint8(style_rgb, "style image"))
     if min(style.size) < MIN_FRAME_SIDE:
         raise InputError("style image", f"must be at least {MIN_FRAME_SIDE} pixels on both sides, got {style.size}")
     engine = make_engine() if engine is None else engine
     out = []
     for k, frame in enumerate(frames):
-        u8 = to_u8(frame, f"frames[{k}]")
+        u8 = _float_rgb_to_uint8(frame, f"frames[{k}]")
         h, w = u8.shape[:2]
         if min(h, w) < MIN_FRAME_SIDE:
             raise InputError(f"frames[{k}]", f"must be at least {MIN_FRAME_SIDE} pixels on both sides, got {(h, w)}")

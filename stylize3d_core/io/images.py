@@ -404,6 +404,25 @@ def to_uint8(rgb: np.ndarray) -> np.ndarray:
     return np.clip(np.rint(np.asarray(rgb, dtype=np.float32) * 255.0), 0, 255).astype(np.uint8)
 
 
+def rgb_to_uint8(image: np.ndarray, name: str) -> np.ndarray:
+    """Check an (H, W, 3) image, uint8 or float in [0, 1], and return it as uint8 (H, W, 3).
+
+    Float values are clipped to [0, 1] and rounded (:func:`to_uint8`); another
+    dtype, another shape, NaN or inf is an InputError naming ``name``. The input
+    is never modified.
+    """
+    a = image if isinstance(image, np.ndarray) else np.asarray(image)
+    if a.ndim != 3 or a.shape[2] != 3 or a.shape[0] < 1 or a.shape[1] < 1:
+        raise InputError(name, f"expected shape (H, W, 3), got {tuple(a.shape)}")
+    if a.dtype == np.uint8:
+        return np.ascontiguousarray(a)
+    if not np.issubdtype(a.dtype, np.floating):
+        raise InputError(name, f"expected uint8 or float values in [0, 1], got dtype {a.dtype}")
+    if not np.isfinite(a).all():
+        raise InputError(name, "contains NaN or infinite values")
+    return to_uint8(a)  # (H, W, 3)
+
+
 def resize_image(rgb: np.ndarray, size_hw: Tuple[int, int]) -> np.ndarray:
     """Resize an image (H, W, C) or (H, W) of values in [0, 1] to ``size_hw``; returns float32, clipped.
 

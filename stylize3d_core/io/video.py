@@ -36,7 +36,7 @@ from PIL import Image
 
 from ..errors import ExportError, InputError, PathLike, Stylize3DError
 from .atomic import atomic_path
-from .images import to_uint8
+from .images import rgb_to_uint8
 
 Progress = Callable[[int, Optional[int]], None]
 """``progress(done, total)``: called after each frame is written; ``total`` is None if unknown."""
@@ -71,22 +71,8 @@ def video_kind(path: PathLike) -> VideoKind:
 
 
 def to_uint8_frame(frame: np.ndarray, index: int) -> np.ndarray:
-    """Check one frame (H, W, 3), uint8 or float in [0, 1], and return it as uint8 (H, W, 3).
-
-    Float values are clipped to [0, 1] and rounded; NaN or inf is an InputError.
-    The input is never modified.
-    """
-    a = frame if isinstance(frame, np.ndarray) else np.asarray(frame)
-    name = f"frame {index}"
-    if a.ndim != 3 or a.shape[2] != 3 or a.shape[0] < 1 or a.shape[1] < 1:
-        raise InputError(name, f"expected shape (H, W, 3), got {tuple(a.shape)}")
-    if a.dtype == np.uint8:
-        return np.ascontiguousarray(a)
-    if not np.issubdtype(a.dtype, np.floating):
-        raise InputError(name, f"expected uint8 or float values in [0, 1], got dtype {a.dtype}")
-    if not np.isfinite(a).all():
-        raise InputError(name, "contains NaN or infinite values")
-    return to_uint8(a)  # (H, W, 3)
+    """Frame ``index`` checked and as uint8 (H, W, 3): :func:`~stylize3d_core.io.images.rgb_to_uint8`."""
+    return rgb_to_uint8(frame, f"frame {index}")
 
 
 class _FrameSource:
