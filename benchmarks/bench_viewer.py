@@ -34,7 +34,8 @@ import torch
 
 from app.viewer.orbit import OrbitPose, pose_camera
 from app.viewer.session import DEFAULT_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE, ViewerSession
-from app.viewer.state import PreviewSettings, adapt_preview_long_side, even_size
+from app.viewer.state import PreviewSettings, adapt_preview_long_side
+from stylize3d_core.render.plain import frame_size
 
 
 def orbit_cameras(session: ViewerSession, n: int):
@@ -69,7 +70,7 @@ def adaptive(session: ViewerSession, cams, display, stylized: bool) -> None:
     side = settings.preview_long_side
     times = []
     for cam in cams:
-        size = even_size(session.info.size, side)
+        size = frame_size(session.info.size, side)
         t0 = time.perf_counter()
         session.render_view(cam, size, display, preview=True, stylized=stylized)
         dt = time.perf_counter() - t0
@@ -115,7 +116,7 @@ def main() -> None:
         t_strength = time.perf_counter() - t0
 
         cams = orbit_cameras(s, args.frames)
-        display = even_size(info.size, args.full_size)
+        display = frame_size(info.size, args.full_size)
         h, w = info.size
         print(f"sample {SAMPLE_PHOTO.name}: {w}x{h}, {info.n_points:,} points; torch threads {args.threads}; "
               f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
@@ -125,7 +126,7 @@ def main() -> None:
         for stylized in (False, True):
             print("stylized view" if stylized else "plain 3D photo (no trained model)")
             for side in (int(v) for v in args.preview_sizes.split(",")):
-                size = even_size(info.size, side)
+                size = frame_size(info.size, side)
                 report(f"preview {size[1]}x{size[0]}", time_frames(s, cams, size, display, True, stylized))
             adaptive(s, cams, display, stylized)
             report(f"full frame {display[1]}x{display[0]}",

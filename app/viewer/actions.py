@@ -23,12 +23,13 @@ from stylize3d_core.errors import InputError
 from stylize3d_core.io.camera_path import CameraPath, load_camera_path, save_camera_path
 from stylize3d_core.io.images import save_image
 from stylize3d_core.io.video import ExportCancelled
+from stylize3d_core.render.plain import frame_size
 
 from . import panel as P
 from .orbit import HOME
 from .session import NO_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE, ExportJob, PhotoInfo, StylizeInfo
 from .state import (
-    LOADED_PATH, ExportSettings, even_size, export_destination, fov_range, trajectory_cameras, view_camera,
+    LOADED_PATH, ExportSettings, export_destination, fov_range, trajectory_cameras, view_camera,
 )
 
 IMAGE_FILTERS = ((".jpg .jpeg .png .webp .tif .tiff", "Images (JPEG, PNG, WebP, TIFF)"), ("", "All files"))
@@ -257,7 +258,7 @@ class WindowActions:
     def save_camera_path(self, path: str) -> None:
         """Write the export's cameras as camera-path JSON (on the worker)."""
         cams = self.export_cameras()
-        fps, size = self.state.export.fps, even_size(self.info.size, self.state.export.size)
+        fps, size = self.state.export.fps, frame_size(self.info.size, self.state.export.size)
         self.worker.submit("save camera path", lambda: save_camera_path(path, cams, fps=fps, image_size=size),
                            on_done=lambda out: self._post(lambda: self._set_status(f"Saved {out}")),
                            on_error=lambda name, e: self._post(lambda: self._on_task_failed(name, e)))
@@ -290,7 +291,7 @@ class WindowActions:
             raise InputError("export", "an export is already running")
         e = self.state.export
         dest = export_destination(path, e.format)
-        job = ExportJob(dest, self.export_cameras(), even_size(self.info.size, e.size), e.fps,
+        job = ExportJob(dest, self.export_cameras(), frame_size(self.info.size, e.size), e.fps,
                         self.state.stylized and self.stylize_available)
         cancel = self._export_cancel = threading.Event()
 

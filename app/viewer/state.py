@@ -24,6 +24,7 @@ from stylize3d_core.errors import InputError
 from stylize3d_core.geometry.camera import Cameras, check_fov
 from stylize3d_core.geometry.trajectories import TrajectoryName, TrajectorySettings, make_trajectory
 from stylize3d_core.io.video import MAX_GIF_FPS
+from stylize3d_core.render.plain import frame_size
 
 from .orbit import HOME, OrbitLimits, OrbitPose, OrbitScene, clamp_pose, pose_camera, relative_to
 
@@ -173,22 +174,13 @@ def trajectory_cameras(state: ViewState, scene: OrbitScene, photo_fov_deg: float
     return relative_to(state.pose, scene, make_trajectory(settings))
 
 
-def even_size(photo_hw: Tuple[int, int], long_side: int) -> Tuple[int, int]:
-    """(H, W) with the photo's aspect, long side ``long_side``, both even (H.264 needs even sizes)."""
-    h, w = photo_hw
-    if h < 1 or w < 1:
-        raise InputError("photo size", f"must be positive, got {photo_hw!r}")
-    s = long_side / max(h, w)
-    return max(2, int(round(h * s / 2)) * 2), max(2, int(round(w * s / 2)) * 2)
-
-
 def full_frame_size(photo_hw: Tuple[int, int], view_hw: Tuple[int, int], cap: int) -> Tuple[int, int]:
     """(H, W) of the full-resolution frame: the photo's aspect, fitting ``view_hw``, long side <= ``cap``."""
     h, w = photo_hw
     vh, vw = max(1, view_hw[0]), max(1, view_hw[1])
     fit = min(vh / h, vw / w)  # scale at which the photo fills the view
     long_side = int(min(cap, max(32, math.floor(fit * max(h, w)))))
-    return even_size(photo_hw, long_side)
+    return frame_size(photo_hw, long_side)
 
 
 def adapt_preview_long_side(current: int, seconds: float, settings: PreviewSettings = PreviewSettings()) -> int:

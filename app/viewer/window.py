@@ -33,13 +33,14 @@ import open3d.visualization.gui as gui
 
 from stylize3d_core.errors import InputError
 from stylize3d_core.io.camera_path import CameraPath
+from stylize3d_core.render.plain import frame_size
 
 from . import panel as P
 from .actions import WindowActions, ui_callback
 from .orbit import HOME, OrbitLimits, apply_drag, apply_wheel, orbit
 from .session import NO_MODEL, PhotoInfo, ViewerSession, ViewFrame
 from .state import (
-    FrameScheduler, PreviewSettings, ViewState, adapt_preview_long_side, even_size, full_frame_size, view_camera,
+    FrameScheduler, PreviewSettings, ViewState, adapt_preview_long_side, full_frame_size, view_camera,
     view_fov,
 )
 from .worker import ComputeWorker, RenderResult
@@ -254,7 +255,7 @@ class ViewerWindow(WindowActions):
         info = self.info
         cam = camera if camera is not None else view_camera(self.state, info.scene, info.fov_y_deg)
         display = self._display_hw
-        size = even_size(info.size, min(self._preview_side, max(display))) if preview else display
+        size = frame_size(info.size, min(self._preview_side, max(display))) if preview else display
         stylized = self.state.stylized and self.stylize_available
         version = self.scheduler.version
         session = self.session

@@ -77,6 +77,8 @@ def frame_size(photo_size: Tuple[int, int], long_side: int, *, even: bool = True
     if int(long_side) != long_side or not 16 <= long_side <= 8192:
         raise InputError("size", f"must be an integer from 16 to 8192, got {long_side!r}")
     h, w = photo_size
+    if h < 1 or w < 1:
+        raise InputError("photo size", f"must be positive, got {tuple(photo_size)!r}")
     scale = long_side / max(h, w)
     step = 2 if even else 1
     H = max(step, int(round(h * scale / step)) * step)

@@ -18,7 +18,7 @@ from app.viewer.orbit import HOME, OrbitPose, pose_camera
 from app.viewer.session import (
     NO_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE, ExportJob, ViewerSession, display_image,
 )
-from app.viewer.state import even_size
+from stylize3d_core.render.plain import frame_size
 from stylize3d_core.errors import InputError
 from stylize3d_core.geometry.trajectories import circle
 from stylize3d_core.io.video import ExportCancelled
@@ -36,7 +36,7 @@ def plain() -> ViewerSession:
 
 def render(s: ViewerSession, pose=HOME, side=128, preview=False, stylized=False) -> np.ndarray:
     cam = pose_camera(pose, s.info.scene, s.info.fov_y_deg)
-    H, W = even_size(s.info.size, side)
+    H, W = frame_size(s.info.size, side)
     return s.render(cam, H, W, preview=preview, stylized=stylized)
 
 
@@ -45,7 +45,7 @@ def test_plain_view_is_the_photo_and_orbit_shows_parallax(plain):
     assert max(info.size) == MAX_SIZE and info.n_points > info.size[0] * info.size[1]
     assert 0 < info.scene.near_depth <= info.scene.centre_depth
     img = render(plain)
-    hw = even_size(info.size, 128)
+    hw = frame_size(info.size, 128)
     assert img.shape == (*hw, 3) and img.dtype == np.float32
     assert np.isfinite(img).all() and img.min() >= 0 and img.max() <= 1 and img.std() > 0.05
     # Seen from the photo's own camera, the view is the photo (resized).
@@ -123,7 +123,7 @@ def test_stylized_view_restyle_reuses_the_encoding(untrained):
     r = s.prepare_stylized()
     assert r.available and "stage 1" in r.message and s.can_stylize
     base = render(s, stylized=True)
-    assert base.shape == (*even_size(s.info.size, 128), 3) and np.isfinite(base).all()
+    assert base.shape == (*frame_size(s.info.size, 128), 3) and np.isfinite(base).all()
     assert np.abs(base - render(s, stylized=False)).mean() > 0.02  # through the model, not the plain colours
     encoded = s._stylized
     s.load_style(str(SAMPLE_STYLE))
@@ -139,7 +139,7 @@ def test_stylized_view_restyle_reuses_the_encoding(untrained):
 
 def test_export_writes_atomically_and_cancels_cleanly(plain, tmp_path):
     cams = circle(4, fov_y_deg=plain.info.fov_y_deg)
-    size = even_size(plain.info.size, 64)
+    size = frame_size(plain.info.size, 64)
     calls, between = [], []
     out = plain.export(ExportJob(str(tmp_path / "clip.mp4"), cams, size, 8.0, False),
                        progress=lambda done, total: calls.append((done, total)),

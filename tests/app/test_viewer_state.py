@@ -10,10 +10,11 @@ import torch
 from app.viewer.orbit import HOME, OrbitPose, OrbitScene, cam_to_world
 from app.viewer.state import (
     ExportSettings, FrameScheduler, PreviewSettings, ViewState, adapt_preview_long_side, clamp_state_pose,
-    even_size, export_destination, fov_range, full_frame_size, trajectory_cameras, view_camera, view_fov,
+    export_destination, fov_range, full_frame_size, trajectory_cameras, view_camera, view_fov,
 )
 from stylize3d_core.errors import InputError
 from stylize3d_core.geometry.trajectories import TrajectorySettings, make_trajectory, static
+from stylize3d_core.render.plain import frame_size
 
 SCENE = OrbitScene(centre_depth=0.7)
 
@@ -55,8 +56,8 @@ def test_view_camera_and_fov():
 
 
 def test_sizes():
-    assert even_size((300, 451), 256) == (170, 256)
-    assert even_size((451, 300), 256) == (256, 170)
+    assert frame_size((300, 451), 256) == (170, 256)
+    assert frame_size((451, 300), 256) == (256, 170)
     # Fits the view, keeps the aspect, capped, even.
     assert full_frame_size((300, 450), (500, 700), 768) == (466, 700)  # width-limited, under the cap
     assert full_frame_size((300, 450), (2000, 3000), 768) == (512, 768)
@@ -64,7 +65,7 @@ def test_sizes():
     h, w = full_frame_size((123, 457), (333, 777), 768)
     assert h % 2 == 0 and w % 2 == 0 and w <= 777 and h <= 333
     with pytest.raises(InputError):
-        even_size((0, 10), 64)
+        frame_size((0, 10), 64)
 
 
 def test_preview_size_adapts_to_the_time_budget():
