@@ -18,9 +18,7 @@ machine) over ``--repeats`` runs, after one warm-up, under
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
-import time
 from pathlib import Path
 from typing import Callable, Tuple
 
@@ -28,6 +26,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from stylize3d_core.eval.timing import median_and_min  # noqa: E402
 from stylize3d_core.models.adaattn import AdaAttNConfig, AdaAttNStylizer  # noqa: E402
 from stylize3d_core.models.decoder import DecoderConfig, UNetDecoder  # noqa: E402
 from stylize3d_core.models.style_features import StyleEncoder  # noqa: E402
@@ -35,13 +34,8 @@ from stylize3d_core.models.style_features import StyleEncoder  # noqa: E402
 
 def timed(fn: Callable[[], object], repeats: int) -> Tuple[float, float]:
     """(median ms, min ms) of ``fn`` after one warm-up call."""
-    fn()
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append((time.perf_counter() - t0) * 1000.0)
-    return statistics.median(times), min(times)
+    med, best = median_and_min(fn, repeats, warmup=1)
+    return 1000.0 * med, 1000.0 * best
 
 
 def decoder_ms(config: DecoderConfig, size: int, repeats: int) -> Tuple[float, float]:

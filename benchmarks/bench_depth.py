@@ -20,10 +20,8 @@ over ``--repeats`` runs after one warm-up:
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
 import tempfile
-import time
 import warnings
 from pathlib import Path
 from typing import Callable, Tuple
@@ -37,19 +35,14 @@ from stylize3d_core.depth.onnx_model import PRESETS, OnnxDepthModel, OnnxSetting
 from stylize3d_core.depth.prior import estimate_prior  # noqa: E402
 from stylize3d_core.depth.refine import RefineSettings, refine_disparity  # noqa: E402
 from stylize3d_core.depth.stereo import compute_disparity  # noqa: E402
+from stylize3d_core.eval.timing import median_and_min  # noqa: E402
 
 SAMPLES = ("astronaut", "chelsea", "coffee", "rocket")
 
 
 def timed(fn: Callable[[], object], repeats: int) -> Tuple[float, float]:
     """(median s, min s) of ``fn`` after one warm-up call."""
-    fn()
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times), min(times)
+    return median_and_min(fn, repeats, warmup=1)
 
 
 def photo_at(name: str, megapixels: float) -> np.ndarray:

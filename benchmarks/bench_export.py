@@ -8,14 +8,13 @@ writing are timed. Run: ``python benchmarks/bench_export.py [--frames 90] [--siz
 from __future__ import annotations
 
 import argparse
-import statistics
 import tempfile
-import time
 from pathlib import Path
 from typing import List
 
 import numpy as np
 
+from stylize3d_core.eval.timing import median_time
 from stylize3d_core.io.video import write_video
 
 
@@ -44,14 +43,10 @@ def main() -> None:
     print(f"{args.frames} frames of {args.size}x{args.size}, median of {args.repeats} runs")
     with tempfile.TemporaryDirectory() as tmp:
         for label, name in (("MP4 (libx264, quality 8)", "out.mp4"), ("GIF", "out.gif"), ("PNG frames", "frames")):
-            times = []
-            for _ in range(args.repeats):
-                t0 = time.perf_counter()
-                write_video(Path(tmp) / name, frames, fps=30)
-                times.append(time.perf_counter() - t0)
+            seconds = median_time(lambda: write_video(Path(tmp) / name, frames, fps=30), args.repeats)
             out = Path(tmp) / name
             size = sum(p.stat().st_size for p in out.iterdir()) if out.is_dir() else out.stat().st_size
-            print(f"{label:26s} {statistics.median(times):7.2f} s   ({size / 1e6:.1f} MB)")
+            print(f"{label:26s} {seconds:7.2f} s   ({size / 1e6:.1f} MB)")
 
 
 if __name__ == "__main__":

@@ -11,13 +11,12 @@ Run from the repository root: ``.venv/bin/python -m benchmarks.bench_ldi [--repe
 from __future__ import annotations
 
 import argparse
-import statistics
-import time
-from typing import Callable, Tuple
+from typing import Tuple
 
 import cv2
 import numpy as np
 
+from stylize3d_core.eval.timing import median_time
 from stylize3d_core.scene.ldi import build_ldi
 from stylize3d_core.scene.pointcloud import ldi_to_points
 
@@ -43,15 +42,6 @@ def synthetic_photo(h: int, w: int, edges: bool) -> Tuple[np.ndarray, np.ndarray
     return rgb, depth
 
 
-def median_time(fn: Callable[[], object], repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5, help="runs per measurement (median reported)")
@@ -61,8 +51,7 @@ def main() -> None:
     for h, w in SIZES:
         for edges in (True, False):
             rgb, depth = synthetic_photo(h, w, edges)
-            build_ldi(rgb, depth)  # warm-up
-            t_ldi = median_time(lambda: build_ldi(rgb, depth), args.repeats)
+            t_ldi = median_time(lambda: build_ldi(rgb, depth), args.repeats, warmup=1)
             ldi = build_ldi(rgb, depth)
             t_pts = median_time(lambda: ldi_to_points(ldi, 60.0), args.repeats)
             n = len(ldi_to_points(ldi, 60.0))

@@ -19,7 +19,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 CHILD = r"""
-import json, resource, sys, time
+import json, sys, time
 import numpy as np
 from PIL import Image
 from stylize3d_core.pipeline import RenderJob, run_render
@@ -33,8 +33,9 @@ t0 = time.perf_counter()
 res = run_render(RenderJob(photo=src, output=out + "." + fmt, depth=depth, size=int(size),
                            frames=int(frames), max_size=int(long_side)))
 total = time.perf_counter() - t0
+from stylize3d_core.eval.timing import peak_rss_gib
 print(json.dumps({"pixels": img.size[0] * img.size[1], "points": res.n_points, "total": total,
-                  "timings": res.timings, "peak_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20}))
+                  "timings": res.timings, "peak_gib": peak_rss_gib()}))
 """
 
 

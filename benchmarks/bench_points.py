@@ -23,14 +23,11 @@ Run from the repository root:
 from __future__ import annotations
 
 import argparse
-import resource
-import statistics
-import time
-from typing import Callable, List
 
 import numpy as np
 import torch
 
+from stylize3d_core.eval.timing import median_time, peak_rss_gib
 from stylize3d_core.models.encoder import Encoder, EncoderConfig, build_hierarchy
 from stylize3d_core.points import ball_query, farthest_point_sample, three_nn
 
@@ -50,15 +47,6 @@ def photo_cloud(n_points: int, seed: int = 0) -> torch.Tensor:
     pick = rng.choice(len(front), n_back, replace=n_back > len(front))
     back = front[pick] + np.array([0.0, 0.0, 0.5])
     return torch.from_numpy(np.concatenate([front, back]).astype(np.float32))
-
-
-def median_time(fn: Callable[[], object], repeats: int) -> float:
-    times: List[float] = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return statistics.median(times)
 
 
 def bench_scipy(xyz: torch.Tensor, radius: float, k: int) -> float:
@@ -129,7 +117,7 @@ def main() -> None:
         print(f"  build_hierarchy (all levels)   {t_build:7.3f}")
         print(f"  encoder forward, paper         {t_enc:7.3f}")
         print(f"  encoder forward, lite          {t_lite:7.3f}")
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024**2
+    peak = peak_rss_gib()
     print(f"\npeak RSS {peak:.2f} GiB")
 
 

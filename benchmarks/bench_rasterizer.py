@@ -30,6 +30,7 @@ import torch
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
+from stylize3d_core.eval.timing import median_and_min  # noqa: E402
 from stylize3d_core.geometry.camera import intrinsics_from_fov  # noqa: E402
 from stylize3d_core.render.holes import fill_holes  # noqa: E402
 from stylize3d_core.render.rasterize import RasterSettings, rasterize_points  # noqa: E402
@@ -130,13 +131,8 @@ def main() -> None:
         image = frag.image.contiguous()
         extra = torch.rand(512, 512, generator=torch.Generator().manual_seed(1)) < 0.05
         hole = frag.hole | extra  # a few more holes than this dense scene has
-        t_fill = [0.0] * (args.runs + 2)
-        for r in range(args.runs + 2):
-            t = time.perf_counter()
-            fill_holes(image, hole)
-            t_fill[r] = 1e3 * (time.perf_counter() - t)
-    t_fill = t_fill[2:]
-    print(f"{'fill_holes 3 x 512^2':34s} {statistics.median(t_fill):8.1f} {min(t_fill):7.1f}"
+        fill_med, fill_min = median_and_min(lambda: fill_holes(image, hole), args.runs, warmup=2)
+    print(f"{'fill_holes 3 x 512^2':34s} {1e3 * fill_med:8.1f} {1e3 * fill_min:7.1f}"
           f"   ({int(hole.sum())} holes)")
 
 

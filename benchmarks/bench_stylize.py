@@ -44,7 +44,7 @@ ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_MODEL = ROOT / "assets/model/stylize3d_lite.safetensors"
 
 CHILD = r"""
-import json, resource, sys, time
+import json, sys, time
 import numpy as np
 import torch
 from PIL import Image
@@ -93,7 +93,8 @@ if video:
     t0 = time.perf_counter()
     write_video(out + ".mp4", st.frames(cams, H, W), fps=30, n_frames=len(cams))
     t["video"] = time.perf_counter() - t0
-t["peak GiB"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
+from stylize3d_core.eval.timing import peak_rss_gib
+t["peak GiB"] = peak_rss_gib()
 print(json.dumps({"timings": t, "points": st.num_points, "photo": list(p3d.size), "frame": [H, W],
                   "preview": [Hp, Wp], "threads": torch.get_num_threads()}))
 """
