@@ -6,16 +6,6 @@ from stylize3d_core.points import ball_query, knn
 from stylize3d_core.points.reference import ball_query_reference, knn_reference, pairwise_sq_dist
 
 
-def surface_cloud(h: int, w: int, jitter: float = 0.0, seed: int = 0) -> torch.Tensor:
-    """(h*w, 3) NDC-like points of a photo: a pixel grid over a bumpy surface with a depth step."""
-    g = torch.Generator().manual_seed(seed)
-    ys, xs = torch.meshgrid(torch.linspace(-1, 1, h), torch.linspace(-1, 1, w), indexing="ij")
-    xy = torch.stack([xs, ys], -1).reshape(-1, 2)
-    xy = xy + jitter * (torch.rand(xy.shape, generator=g) - 0.5) * (2.0 / w)
-    z = 0.2 * torch.sin(3 * xy[:, 0]) * torch.cos(2 * xy[:, 1]) + 0.6 * (xy[:, 0] > 0.3)
-    return torch.cat([xy, z[:, None]], 1)
-
-
 def rand(n, seed):
     return torch.rand(n, 3, generator=torch.Generator().manual_seed(seed))
 
@@ -41,7 +31,7 @@ def test_ball_query_matches_reference_random():
     assert {0, 16} <= set(counts.tolist()) and bool(((counts > 0) & (counts < 16)).any())
 
 
-def test_ball_query_matches_reference_jittered_surface():
+def test_ball_query_matches_reference_jittered_surface(surface_cloud):
     xyz = surface_cloud(48, 64, jitter=0.5)
     qry = xyz[::3]  # queries are points of the cloud, as in the encoder
     fast, ref = ball_query(xyz, qry, 0.05, 16), ball_query_reference(xyz, qry, 0.05, 16)
@@ -51,7 +41,7 @@ def test_ball_query_matches_reference_jittered_surface():
     assert torch.equal(fast.idx[:, 0], torch.arange(0, len(xyz), 3))
 
 
-def test_ball_query_exact_grid_ties_aside():
+def test_ball_query_exact_grid_ties_aside(surface_cloud):
     # A pixel grid has many equidistant neighbours: compare distances, not indices.
     xyz = surface_cloud(40, 50)
     r = 0.07  # not a multiple of the grid spacing

@@ -7,16 +7,6 @@ from stylize3d_core.points.reference import coverage_radius, farthest_point_samp
 from stylize3d_core.points.sampling import _tree_height
 
 
-def surface_cloud(h: int, w: int, jitter: float = 0.0, seed: int = 0) -> torch.Tensor:
-    """(h*w, 3) NDC-like points of a photo: a pixel grid over a bumpy surface with a depth step."""
-    g = torch.Generator().manual_seed(seed)
-    ys, xs = torch.meshgrid(torch.linspace(-1, 1, h), torch.linspace(-1, 1, w), indexing="ij")
-    xy = torch.stack([xs, ys], -1).reshape(-1, 2)
-    xy = xy + jitter * (torch.rand(xy.shape, generator=g) - 0.5) * (2.0 / w)
-    z = 0.2 * torch.sin(3 * xy[:, 0]) * torch.cos(2 * xy[:, 1]) + 0.6 * (xy[:, 0] > 0.3)
-    return torch.cat([xy, z[:, None]], 1)
-
-
 def test_matches_textbook_fps_random():
     xyz = torch.rand(2000, 3, generator=torch.Generator().manual_seed(1))
     idx = farthest_point_sample(xyz, 500)
@@ -26,7 +16,7 @@ def test_matches_textbook_fps_random():
 
 
 @pytest.mark.parametrize("n_points, n_samples", [(64 * 48, 768), (150 * 140, 300)])
-def test_matches_textbook_fps_surface(n_points, n_samples):
+def test_matches_textbook_fps_surface(n_points, n_samples, surface_cloud):
     # two sizes exercise two k-d tree heights of the bucket FPS
     h = 64 if n_points == 64 * 48 else 150
     xyz = surface_cloud(h, n_points // h, jitter=0.5)
@@ -35,7 +25,7 @@ def test_matches_textbook_fps_surface(n_points, n_samples):
     assert torch.equal(idx, ref)
 
 
-def test_coverage_radius_close_to_fps_from_point_zero():
+def test_coverage_radius_close_to_fps_from_point_zero(surface_cloud):
     xyz = surface_cloud(60, 80, jitter=0.5)
     fast = coverage_radius(xyz, farthest_point_sample(xyz, 300))
     ref = coverage_radius(xyz, farthest_point_sample_reference(xyz, 300, first=0))
