@@ -1,6 +1,6 @@
 """Stylized 3D photos end to end: latency, frame rates, video export, memory and consistency.
 
-Prints, for a model checkpoint, a photo and style images (DESIGN.md "Targets"):
+Prints, for a model checkpoint, a photo and style images (targets: the README's benchmark table):
 
 (a) seconds from photo + style to the first stylized frame for a ~1 MP photo
     (the photo upscaled to 1024 on its long side): load, depth (built-in prior),

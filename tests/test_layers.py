@@ -1,4 +1,4 @@
-"""The layering rules of STYLE.md: the library never imports the viewer or a GUI toolkit."""
+"""The layering rules of docs/architecture.md ("Layers"): the library never imports the viewer or a GUI toolkit."""
 
 import ast
 from pathlib import Path

@@ -1,4 +1,4 @@
-"""Depth sources: every way a user can give a photo its depth (see DESIGN.md stage 1).
+"""Depth sources: every way a user can give a photo its depth (stage 2 in docs/architecture.md, "Pipeline stages").
 
 Modules: ``types`` (DepthMap, the one result), ``sources`` (the DepthSource
 interface, its implementations and ``parse_depth_spec``), ``prior`` and

@@ -1,4 +1,4 @@
-"""Evaluation (paper Sec. 4.2; DESIGN.md stage 9): multi-view consistency, the 2D baseline, view synthesis."""
+"""Evaluation (paper Sec. 4.2): multi-view consistency, the 2D baseline, view synthesis; benchmark timing."""
 
 from .baseline import baseline_frames, stylize_frames_2d
 from .consistency import (

@@ -1,4 +1,4 @@
-"""Multi-view consistency of rendered frames (paper Sec. 4.2; DESIGN.md stage 9).
+"""Multi-view consistency of rendered frames (paper Sec. 4.2).
 
 Two frames of the same 3D photo are consistent when a surface point has the
 same colour in both. We measure it by **warping** view ``i`` into view ``j``

@@ -1,6 +1,6 @@
 """Layered depth image (LDI): the photo's surface torn at depth edges, plus hidden background.
 
-Stage 2 of the pipeline (see DESIGN.md), after 3DPhoto (Shih et al. 2020):
+Stage 3 of the pipeline (docs/architecture.md, "Pipeline stages"), after 3DPhoto (Shih et al. 2020):
 
 1. **Scene units.** The depth is multiplied by ``depth_scale`` so that its 1st
    percentile equals :data:`~stylize3d_core.geometry.camera.NEAR_DEPTH` (1/3).

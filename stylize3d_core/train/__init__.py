@@ -1,4 +1,4 @@
-"""Training data for the stylization model (DESIGN.md stage 7).
+"""Training data for the stylization model (docs/architecture.md, "Pipeline stages", training).
 
 ``data``: training samples (pseudo novel views rendered from a photo's LDI, and
 procedural scenes with true novel views); ``cache``: their disk cache

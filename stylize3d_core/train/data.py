@@ -1,4 +1,4 @@
-"""Training samples for the stylization model (DESIGN.md stage 7: training from 2D images only).
+"""Training samples for the stylization model (training from 2D images only).
 
 A :class:`TrainSample` holds everything one training example needs: the source
 image, its LDI point cloud (world = source camera frame, scene units), the

@@ -1,4 +1,4 @@
-"""Training of the stylization model from 2D images only (paper Sec. 4; DESIGN.md stage 7).
+"""Training of the stylization model from 2D images only (paper Sec. 4).
 
 * **Stage 1 (view synthesis):** encoder + decoder learn to render each
   sample's target views: L1 + perceptual loss (EfficientNet features) against
@@ -11,7 +11,7 @@
   stage-1 loss at strength 0, so the decoder still renders the original photo
   when the user sets the strength to 0.
 
-Consistency loss (DESIGN.md): a random subset of the sample's points is
+Consistency loss: a random subset of the sample's points is
 projected into every predicted view; for every pair of views, the L1 difference
 of the colours sampled at the points visible in both is averaged.
 
