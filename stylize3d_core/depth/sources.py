@@ -33,9 +33,9 @@ import numpy as np
 from PIL import Image, UnidentifiedImageError
 
 from ..errors import InputError, PathLike
-from ..io.depth_files import load_depth_file
 from ..io.images import load_image
 from ._util import check_rgb
+from .files import load_depth_file
 from .onnx_model import DEFAULT_PRESET, OnnxDepthModel, OnnxPreset, OnnxSettings, preset_by_name
 from .phone_xmp import embedded_depth_map, has_embedded_depth
 from .prior import PriorSettings, estimate_prior
