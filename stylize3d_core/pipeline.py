@@ -106,8 +106,8 @@ def load_photo3d(
     image = load_image(photo, max_size=max_size)
     source = parse_depth_spec(depth, refine=refine)
     t1 = time.perf_counter()
-    rgb = source.photo_view(image.rgb)  # the left half of a side-by-side stereo card, else the photo
-    depth_map = source.estimate(image.rgb, photo_path=photo)
+    found = source.estimate(image)  # reads phone depth from the bytes load_image kept; no second read
+    rgb, depth_map = found.rgb, found.depth_map  # rgb: the left half of a side-by-side stereo card, else the photo
     t2 = time.perf_counter()
     if fov is None:
         fov = image.fov_y_deg() or DEFAULT_FOV_Y_DEG

@@ -1,12 +1,38 @@
 """The layering rules of docs/architecture.md ("Layers"): the library never imports the viewer or a GUI toolkit."""
 
 import ast
+import shutil
 from pathlib import Path
+from typing import Iterator, List, Optional, Tuple
+
+import pytest
 
 import stylize3d_core
 
 LIB = Path(stylize3d_core.__file__).parent
 FORBIDDEN = ("app", "open3d.visualization", "tkinter", "PySide6", "PyQt5", "PyQt6", "wx")
+
+LAYERS: Tuple[Tuple[str, ...], ...] = (
+    ("errors",),
+    ("checks",),
+    ("geometry",),
+    ("io",),
+    ("depth",),
+    ("scene",),
+    ("render", "points"),
+    ("models",),
+    ("train", "stylize"),
+    ("eval", "pipeline"),
+    ("stylize3d_core",),
+)
+"""The package order of ``stylize3d_core``, bottom first; the viewer and the CLI (``app/``) sit above it all.
+
+Each name is a package (``io``) or a top-level module (``errors.py``); ``stylize3d_core`` is the
+package's own ``__init__.py``, which may re-export anything. A module may import from its own
+package and from lower layers only: never from a higher layer, nor from another package of its
+own layer (``render`` and ``points``, ``train`` and ``stylize``, ``eval`` and ``pipeline`` are
+independent of each other). Imports inside functions count as well.
+"""
 
 
 def _imports(path: Path):
@@ -33,3 +59,110 @@ def test_every_library_package_has_tests():
     packages = [p.name for p in LIB.iterdir() if p.is_dir() and (p / "__init__.py").exists()]
     missing = [p for p in packages if not any((tests / p).glob("test_*.py"))]
     assert not missing, f"packages without a tests/<package>/test_*.py: {missing}"
+
+
+# ---------------------------------------------------------------------------- package order
+
+
+def _module_parts(path: Path, root: Path) -> List[str]:
+    """['stylize3d_core', 'io', 'images'] for root/io/images.py; a package's __init__ is the package."""
+    parts = [root.name, *path.relative_to(root).with_suffix("").parts]
+    return parts[:-1] if parts[-1] == "__init__" else parts
+
+
+def _is_module(parts: List[str], root: Path) -> bool:
+    where = root.joinpath(*parts[1:])
+    return where.with_suffix(".py").is_file() or (where / "__init__.py").is_file()
+
+
+def _library_imports(path: Path, root: Path) -> Iterator[Tuple[int, List[str]]]:
+    """(line, dotted name as parts) of every import of the package ``root`` in ``path``, relative ones resolved."""
+    here = _module_parts(path, root)
+    package = here if path.name == "__init__.py" else here[:-1]
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                yield node.lineno, alias.name.split(".")
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package[: len(package) - node.level + 1] + (node.module.split(".") if node.module else [])
+            else:
+                base = node.module.split(".")
+            for alias in node.names:  # `from .. import depth` imports the package depth
+                candidate = base + [alias.name]
+                yield node.lineno, candidate if base[0] == root.name and _is_module(candidate, root) else base
+
+
+def _unit(parts: List[str], root: Path) -> Optional[str]:
+    """The LAYERS name a module belongs to; None outside the package."""
+    if parts[0] != root.name:
+        return None
+    return parts[1] if len(parts) > 1 else root.name
+
+
+def layer_violations(root: Path) -> List[str]:
+    """Every import in the package at ``root`` that goes up (or sideways) in :data:`LAYERS`, in words."""
+    rank = {name: i for i, layer in enumerate(LAYERS) for name in layer}
+    bad = []
+    for path in sorted(root.rglob("*.py")):
+        src = _unit(_module_parts(path, root), root)
+        for line, parts in _library_imports(path, root):
+            dst = _unit(parts, root)
+            if dst is None or dst == src:
+                continue
+            where = f"{path.relative_to(root)}:{line}: {src} imports {'.'.join(parts)}"
+            unknown = [u for u in (src, dst) if u not in rank]
+            if unknown:
+                bad.append(f"{where} ({', '.join(unknown)} not in LAYERS: place it in the package order)")
+            elif rank[dst] == rank[src]:
+                bad.append(f"{where} (same layer: {src} and {dst} must stay independent)")
+            elif rank[dst] > rank[src]:
+                bad.append(f"{where} (upward: {dst} is above {src})")
+    return bad
+
+
+def test_imports_follow_the_package_order():
+    assert not layer_violations(LIB), "\n".join(layer_violations(LIB))
+
+
+def test_layers_name_every_package_and_top_level_module():
+    present = {p.name for p in LIB.iterdir() if p.is_dir() and (p / "__init__.py").exists()}
+    present |= {p.stem for p in LIB.glob("*.py") if p.name != "__init__.py"} | {LIB.name}
+    listed = [name for layer in LAYERS for name in layer]
+    assert len(listed) == len(set(listed))
+    assert set(listed) == present
+
+
+@pytest.fixture
+def library_copy(tmp_path: Path) -> Path:
+    """A copy of the package to plant bad imports in."""
+    return Path(shutil.copytree(LIB, tmp_path / LIB.name, ignore=shutil.ignore_patterns("__pycache__")))
+
+
+@pytest.mark.parametrize(
+    "module, source, expected",
+    [
+        ("io/_planted.py", "from ..depth.types import DepthMap\n", "io imports stylize3d_core.depth.types (upward"),
+        ("geometry/_planted.py", "def f():\n    from stylize3d_core.scene import ldi\n",
+         "geometry imports stylize3d_core.scene.ldi (upward"),
+        ("render/_planted.py", "import stylize3d_core.models.checkpoint\n", "render imports stylize3d_core.models"),
+        ("errors_extra.py", "from .errors import InputError\n", "errors_extra not in LAYERS"),
+        ("points/_planted.py", "from .. import render\n", "points imports stylize3d_core.render (same layer"),
+        ("depth/_planted.py", "from stylize3d_core import pipeline\n", "depth imports stylize3d_core.pipeline (upward"),
+        ("pipeline_planted.py", "import numpy\nfrom . import errors\n", "pipeline_planted not in LAYERS"),
+    ],
+)
+def test_planted_bad_import_is_caught(library_copy, module, source, expected):
+    target = library_copy / module
+    target.parent.mkdir(exist_ok=True)
+    target.write_text(source, encoding="utf-8")
+    found = layer_violations(library_copy)
+    assert len(found) == 1 and expected in found[0] and module in found[0], found
+
+
+def test_planted_downward_import_is_allowed(library_copy):
+    (library_copy / "depth" / "_planted.py").write_text(
+        "from ..io.images import load_image\nfrom stylize3d_core.geometry import camera\nfrom . import types\n",
+        encoding="utf-8",
+    )
+    assert layer_violations(library_copy) == []

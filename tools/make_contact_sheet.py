@@ -26,7 +26,7 @@ from stylize3d_core.depth.prior import estimate_prior  # noqa: E402
 from stylize3d_core.depth.sources import StereoDepth  # noqa: E402
 from stylize3d_core.depth.stereo import compute_disparity, disparity_to_depth, StereoSettings  # noqa: E402
 from stylize3d_core.io.atomic import atomic_path  # noqa: E402
-from stylize3d_core.io.images import load_image  # noqa: E402
+from stylize3d_core.io.images import load_image, load_image_array  # noqa: E402
 
 ROW_HEIGHT = 200
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".webp", ".tif", ".tiff")
@@ -90,7 +90,7 @@ def build_sheet(folder: Path) -> np.ndarray:
     left, right, name, right_path = stereo_pair(folder)
     rows.append(row(left, estimate_prior(left).depth, f"{name} (left view)", "prior"))
     if right_path is not None:
-        depth = StereoDepth(right_path).estimate(left).depth
+        depth = StereoDepth(right_path).estimate(load_image_array(left)).depth_map.depth
     else:
         result = compute_disparity(left, right)
         depth = disparity_to_depth(result.disparity, result.valid, StereoSettings())[0]

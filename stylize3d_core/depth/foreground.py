@@ -14,9 +14,9 @@ from typing import Tuple
 import cv2
 import numpy as np
 
-from ..io.depth_files import fill_nearest
 from ..io.images import to_uint8
 from ._util import normalise_percentiles
+from .fill import fill_nearest
 
 
 def saliency_map(rgb: np.ndarray, focus: np.ndarray) -> np.ndarray:

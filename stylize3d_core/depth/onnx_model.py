@@ -39,8 +39,8 @@ from onnxruntime.capi.onnxruntime_pybind11_state import (
 
 from ..checks import check_choice, check_range
 from ..errors import InputError, PathLike
-from ..io.depth_files import fill_nearest
 from ._util import check_rgb, nearness_to_depth
+from .fill import fill_nearest
 from .types import DepthMap
 
 _ORT_LOAD_ERRORS = (Fail, InvalidArgument, InvalidGraph, InvalidProtobuf, NoSuchFile)

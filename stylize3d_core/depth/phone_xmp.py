@@ -25,6 +25,10 @@ RangeLinear ``d = dn (far - near) + near``; RangeInverse
 "metric" (in ``Units``); the depth is aligned with the photo by the file's EXIF
 orientation and stretched to the photo's size, as the format prescribes.
 Namespaces are matched by local names, so minor variants of the prefixes work.
+
+Nothing here opens the photo file: the depth is decoded from the bytes that
+:func:`~stylize3d_core.io.images.load_image` read (``LoadedImage.data``), and
+the EXIF orientation is the one it parsed (``LoadedImage.orientation``).
 """
 
 from __future__ import annotations
@@ -38,10 +42,9 @@ from typing import Dict, List, Optional, Tuple
 
 import cv2
 import numpy as np
-from PIL import Image, UnidentifiedImageError
 
 from ..errors import InputError, PathLike
-from ..io.images import apply_orientation
+from ..io.images import LoadedImage, apply_orientation
 from ._util import resize_to
 from .types import DepthMap, DepthKind
 
@@ -276,19 +279,18 @@ def _item_bytes(data: bytes, primary_end: int, items: List[Dict[str, str]], inde
     )
 
 
-def read_embedded_depth(path: PathLike) -> Optional[EmbeddedDepth]:
-    """Decode the depth map embedded in a phone JPEG; None if the file carries none.
+def read_embedded_depth(data: bytes, name: PathLike = "photo") -> Optional[EmbeddedDepth]:
+    """Decode the depth map embedded in a phone JPEG's bytes ``data``; None if it carries none.
 
-    Raises :class:`InputError` naming the file when depth metadata is present but
-    corrupt (bad XML, bad base64, an undecodable image, missing or absurd
-    Near/Far, a container directory that does not match the bytes).
+    Args:
+        data: the whole file, as read (``LoadedImage.data``).
+        name: the file's name, for error messages.
+    Raises:
+        InputError: naming ``name`` when depth metadata is present but corrupt
+            (bad XML, bad base64, an undecodable image, missing or absurd
+            Near/Far, a container directory that does not match the bytes).
     """
-    name = os.fspath(path)
-    try:
-        with open(name, "rb") as fh:
-            data = fh.read()
-    except OSError as exc:
-        raise InputError(name, f"cannot read the file ({exc.strerror or exc})") from exc
+    name = os.fspath(name)
     if data[:2] != b"\xff\xd8":
         return None  # not a JPEG: phones embed depth only in JPEGs
     segments, primary_end = _jpeg_segments(data, name)
@@ -332,46 +334,35 @@ def read_embedded_depth(path: PathLike) -> Optional[EmbeddedDepth]:
     return EmbeddedDepth(depth, "metric", layout, params.get("Units", "m"))
 
 
-def has_embedded_depth(path: PathLike) -> bool:
-    """True if ``path`` is a JPEG whose XMP mentions a depth map (cheap; does not decode it)."""
-    try:
-        with open(os.fspath(path), "rb") as fh:
-            head = fh.read(2)
-            if head != b"\xff\xd8":
-                return False
-            data = head + fh.read()
-    except OSError:
-        return False
-    return (GDEPTH_NS.encode() in data) or (b"/dd/1.0/depthmap/" in data)
+def has_embedded_depth(data: bytes) -> bool:
+    """True if the file bytes ``data`` are a JPEG whose XMP mentions a depth map (cheap; does not decode it)."""
+    return data[:2] == b"\xff\xd8" and ((GDEPTH_NS.encode() in data) or (b"/dd/1.0/depthmap/" in data))
 
 
-def exif_orientation(path: PathLike) -> int:
-    """The EXIF orientation tag (1..8) of an image file; 1 when absent or unreadable."""
-    try:
-        with Image.open(os.fspath(path)) as im:
-            value = im.getexif().get(0x0112, 1)
-    except (OSError, UnidentifiedImageError):
-        return 1
-    return int(value) if value in range(1, 9) else 1
+def embedded_depth_map(image: LoadedImage, *, required: bool = True) -> Optional[DepthMap]:
+    """The depth embedded in the file ``image`` was loaded from, as a DepthMap aligned with ``image.rgb``.
 
-
-def embedded_depth_map(path: PathLike, shape: Tuple[int, int], *, required: bool = True) -> Optional[DepthMap]:
-    """The embedded depth of ``path`` as a DepthMap aligned with the photo of ``shape`` = (H, W).
-
-    The depth is rotated like the photo (EXIF orientation) and stretched to its
-    size. Raises :class:`InputError` if the depth's aspect ratio differs from
-    the photo's by more than 5 %, if the metadata is corrupt, or -- with
-    ``required`` -- if the file carries no depth (else None is returned then).
+    The depth is read from ``image.data`` (the file is not opened again), turned
+    upright like the photo (``image.orientation``) and stretched to
+    ``image.size``. Raises :class:`InputError` naming the file if the depth's
+    aspect ratio differs from the photo's by more than 5 %, if the metadata is
+    corrupt, or -- with ``required`` -- if the file carries no depth or the
+    image was not loaded from a file (else None is returned then).
     """
-    name = os.fspath(path)
-    emb = read_embedded_depth(name)
+    name = image.path or "photo"
+    if image.data is None:
+        if not required:
+            return None
+        raise InputError("depth", "phone depth is read from the photo file; no photo file was given "
+                                  "(the photo is an in-memory array)")
+    emb = read_embedded_depth(image.data, name)
     if emb is None:
         if not required:
             return None
         raise InputError(name, "carries no embedded depth map (GDepth or Dynamic Depth XMP)")
-    depth = apply_orientation(emb.depth, exif_orientation(name))
+    depth = apply_orientation(emb.depth, image.orientation)
     h, w = depth.shape
-    H, W = int(shape[0]), int(shape[1])
+    H, W = image.size
     if abs((w / h) / (W / H) - 1.0) > 0.05:
         raise InputError(name, f"embedded depth map is {w}x{h}, which does not match the photo's shape {W}x{H}")
     out = resize_to(depth, (H, W)).astype(np.float32)

@@ -24,8 +24,8 @@ import numpy as np
 
 from ..checks import check_choice, check_range, check_shape
 from ..errors import InputError
-from ..io.depth_files import fill_nearest
 from ._util import check_rgb
+from .fill import fill_nearest
 from .types import DepthMap
 
 RefineMethod = Literal["bilateral_median", "joint_bilateral", "guided"]

@@ -1,8 +1,11 @@
 """Depth sources: one interface over every way a user can give a photo its depth.
 
-Every source turns a photo ``rgb`` (H, W, 3) float32 in [0, 1] into a
-:class:`~stylize3d_core.depth.types.DepthMap` of the same (H, W): depth finite
-and > 0 everywhere, a validity mask, and its kind ("metric" or "relative").
+Every source turns a loaded photo (:class:`~stylize3d_core.io.images.LoadedImage`:
+its pixels, and for a file its bytes and EXIF orientation) into a
+:class:`~stylize3d_core.depth.types.PhotoDepth`: the photo ``rgb`` (H, W, 3)
+float32 in [0, 1] and a :class:`~stylize3d_core.depth.types.DepthMap` of the
+same (H, W): depth finite and > 0 everywhere, a validity mask, and its kind
+("metric" or "relative"). No source opens the photo file again.
 
 =================================  =================================================
 spec (command line ``--depth``)     source
@@ -16,7 +19,7 @@ spec (command line ``--depth``)     source
 ``stereo:RIGHT``                    :class:`StereoDepth`: the photo is the left view
 ``stereo:sbs`` / ``stereo:sbs:cross``  :class:`StereoDepth`: the photo is a side-by-side
                                     stereo card (parallel / cross-eyed); the photo used
-                                    is its left view, see :meth:`DepthSource.photo_view`
+                                    is its left view, returned as ``PhotoDepth.rgb``
 =================================  =================================================
 
 Any source can be followed by edge alignment (:mod:`.refine`) by wrapping it in
@@ -30,44 +33,45 @@ from abc import ABC, abstractmethod
 from typing import Literal, Optional, Tuple, Union
 
 import numpy as np
-from PIL import Image, UnidentifiedImageError
 
 from ..errors import InputError, PathLike
-from ..io.depth_files import load_depth_file
-from ..io.images import load_image
-from ._util import check_rgb
+from ..io.images import LoadedImage, load_image
+from .files import load_depth_file
 from .onnx_model import DEFAULT_PRESET, OnnxDepthModel, OnnxPreset, OnnxSettings, preset_by_name
 from .phone_xmp import embedded_depth_map, has_embedded_depth
 from .prior import PriorSettings, estimate_prior
 from .refine import RefineSettings, refine_depth
 from .stereo import StereoSettings, compute_disparity, disparity_to_depth, split_side_by_side
-from .types import DepthMap
+from .types import DepthMap, PhotoDepth
 
 SPEC_HELP = (
     "auto, prior, phone, FILE, FILE:disparity, onnx:MODEL.onnx[:PRESET], stereo:RIGHT_IMAGE, stereo:sbs[:cross]"
 )
 
 
+def _check_image(image: LoadedImage) -> LoadedImage:
+    if not isinstance(image, LoadedImage):
+        raise TypeError(f"a depth source takes a LoadedImage (io.images.load_image or load_image_array), "
+                        f"got {type(image).__name__}")
+    return image
+
+
 class DepthSource(ABC):
     """Something that gives a photo its depth. Subclasses implement :meth:`estimate`."""
 
     @abstractmethod
-    def estimate(self, rgb: np.ndarray, *, photo_path: Optional[PathLike] = None) -> DepthMap:
-        """Depth for the photo ``rgb`` (H, W, 3) float in [0, 1].
+    def estimate(self, image: LoadedImage) -> PhotoDepth:
+        """The photo ``image`` holds and its depth.
 
         Args:
-            rgb: the photo as loaded (not modified). For a side-by-side stereo
-                card this is the whole card; the depth is that of
-                ``photo_view(rgb)``.
-            photo_path: the file the photo came from, when there is one (needed
-                by sources that read the file itself, e.g. phone depth).
+            image: the photo as loaded (not modified): its pixels, and, when it
+                came from a file, the file's bytes and EXIF orientation (phone
+                depth is read from those; the file is not opened again).
         Returns:
-            DepthMap aligned with ``photo_view(rgb)``.
+            :class:`~.types.PhotoDepth`: ``rgb`` is ``image.rgb``, except for a
+            side-by-side stereo card, whose left view it is; ``depth_map`` is
+            aligned with ``rgb``.
         """
-
-    def photo_view(self, rgb: np.ndarray) -> np.ndarray:
-        """The part of the loaded image that is the photo: ``rgb`` itself, except for stereo cards."""
-        return rgb
 
     def describe(self) -> str:
         """A short description for logs."""
@@ -80,16 +84,17 @@ class PriorDepth(DepthSource):
     def __init__(self, settings: PriorSettings = PriorSettings()) -> None:
         self.settings = settings
 
-    def estimate(self, rgb: np.ndarray, *, photo_path: Optional[PathLike] = None) -> DepthMap:
+    def estimate(self, image: LoadedImage) -> PhotoDepth:
+        rgb = _check_image(image).rgb
         result = estimate_prior(rgb, self.settings)
-        return DepthMap(result.depth, np.ones(result.depth.shape, bool), "relative", "prior")
+        return PhotoDepth(rgb, DepthMap(result.depth, np.ones(result.depth.shape, bool), "relative", "prior"))
 
     def describe(self) -> str:
         return "built-in prior"
 
 
 class FileDepth(DepthSource):
-    """A depth or disparity file (16-bit PNG, .npy, .pfm, TIFF, EXR), resized to the photo."""
+    """A depth or disparity file (16-bit PNG, .npy, .pfm, TIFF, EXR), resized to the photo (:mod:`.files`)."""
 
     def __init__(self, path: PathLike, kind: Literal["depth", "disparity"] = "depth", scale: float = 1.0) -> None:
         self.path = os.fspath(path)
@@ -100,9 +105,9 @@ class FileDepth(DepthSource):
         self.kind = kind
         self.scale = scale
 
-    def estimate(self, rgb: np.ndarray, *, photo_path: Optional[PathLike] = None) -> DepthMap:
-        shape = check_rgb(rgb).shape[:2]
-        return load_depth_file(self.path, kind=self.kind, size=shape, scale=self.scale)
+    def estimate(self, image: LoadedImage) -> PhotoDepth:
+        image = _check_image(image)
+        return PhotoDepth(image.rgb, load_depth_file(self.path, kind=self.kind, size=image.size, scale=self.scale))
 
     def describe(self) -> str:
         return f"{self.kind} file {self.path}"
@@ -117,22 +122,12 @@ class OnnxDepth(DepthSource):
         base = settings if settings is not None else OnnxSettings()
         self.model = OnnxDepthModel(model_path, OnnxSettings(preset=p, far_ratio=base.far_ratio, threads=base.threads))
 
-    def estimate(self, rgb: np.ndarray, *, photo_path: Optional[PathLike] = None) -> DepthMap:
-        return self.model.estimate(rgb)
+    def estimate(self, image: LoadedImage) -> PhotoDepth:
+        rgb = _check_image(image).rgb
+        return PhotoDepth(rgb, self.model.estimate(rgb))
 
     def describe(self) -> str:
         return f"ONNX model {self.model.path}"
-
-
-def _upright_size(path: str) -> Optional[Tuple[int, int]]:
-    """(H, W) of an image file as displayed (EXIF orientation applied), from its header; None if unreadable."""
-    try:
-        with Image.open(path) as im:
-            w, h = im.size
-            orientation = im.getexif().get(0x0112, 1)
-    except (OSError, UnidentifiedImageError):
-        return None
-    return (w, h) if orientation in (5, 6, 7, 8) else (h, w)
 
 
 class StereoDepth(DepthSource):
@@ -141,13 +136,15 @@ class StereoDepth(DepthSource):
     Args:
         right_path: the right view; None for a side-by-side card (``side_by_side=True``).
         settings: matcher settings (:class:`~.stereo.StereoSettings`).
-        side_by_side: the photo is a stereo card; its left half is the photo.
+        side_by_side: the photo is a stereo card; its left half is the photo,
+            returned as ``PhotoDepth.rgb`` (the card is split once, here).
 
     The right view is loaded with ``max_size`` = the photo's longer side: a
     photo shrunk by ``load_image(max_size=M)`` has a longer side of M, so a right
     view of the same original size is shrunk identically. Views of different
-    original sizes are refused (compared on the files' headers when the photo's
-    path is known, else on the loaded sizes).
+    original sizes are refused (compared on the upright sizes of the files
+    when the photo came from a file, ``LoadedImage.original_size``, else on the
+    loaded sizes).
     """
 
     def __init__(self, right_path: Optional[PathLike] = None, settings: StereoSettings = StereoSettings(),
@@ -160,48 +157,44 @@ class StereoDepth(DepthSource):
         self.settings = settings
         self.side_by_side = side_by_side
 
-    def photo_view(self, rgb: np.ndarray) -> np.ndarray:
-        if not self.side_by_side:
-            return rgb
-        return split_side_by_side(rgb, self.settings)[0]
-
-    def _pair(self, rgb: np.ndarray, photo_path: Optional[PathLike]) -> Tuple[np.ndarray, np.ndarray]:
-        name = os.fspath(photo_path) if photo_path is not None else "stereo card"
+    def _pair(self, image: LoadedImage) -> Tuple[np.ndarray, np.ndarray]:
+        name = image.path if image.path is not None else "stereo card"
         if self.side_by_side:
-            return split_side_by_side(rgb, self.settings, name)
-        left = check_rgb(rgb, name)
-        right_img = load_image(self.right_path, max_size=max(left.shape[:2]))
-        left_name = name if photo_path is not None else "the photo"
-        if photo_path is not None:
-            sizes = (_upright_size(os.fspath(photo_path)), _upright_size(self.right_path))
-            if None not in sizes and sizes[0] != sizes[1]:
-                raise InputError(self.right_path, f"right image is {sizes[1][1]}x{sizes[1][0]} pixels but the left "
-                                                  f"image {left_name} is {sizes[0][1]}x{sizes[0][0]}; a stereo pair "
-                                                  "must have the same size")
-        if right_img.size != left.shape[:2]:
+            return split_side_by_side(image.rgb, self.settings, name)
+        left = image.rgb
+        right_img = load_image(self.right_path, max_size=max(image.size))
+        left_name = name if image.path is not None else "the photo"
+        if image.path is not None and right_img.original_size != image.original_size:
+            (rh, rw), (lh, lw) = right_img.original_size, image.original_size
+            raise InputError(self.right_path, f"right image is {rw}x{rh} pixels but the left image {left_name} is "
+                                              f"{lw}x{lh}; a stereo pair must have the same size")
+        if right_img.size != image.size:
             raise InputError(self.right_path, f"right image is {right_img.size[1]}x{right_img.size[0]} pixels (as "
                                               f"loaded) but the left image {left_name} is {left.shape[1]}x"
                                               f"{left.shape[0]}; a stereo pair must have the same size")
         return left, right_img.rgb
 
-    def estimate(self, rgb: np.ndarray, *, photo_path: Optional[PathLike] = None) -> DepthMap:
-        left, right = self._pair(rgb, photo_path)
+    def estimate(self, image: LoadedImage) -> PhotoDepth:
+        left, right = self._pair(_check_image(image))
         result = compute_disparity(left, right, self.settings)
         depth, kind = disparity_to_depth(result.disparity, result.valid, self.settings)
         what = "side-by-side card" if self.side_by_side else f"right={os.path.basename(self.right_path)}"
-        return DepthMap(depth, result.valid, kind, f"stereo ({what})")
+        return PhotoDepth(left, DepthMap(depth, result.valid, kind, f"stereo ({what})"))
 
     def describe(self) -> str:
         return "stereo card" if self.side_by_side else f"stereo pair with {self.right_path}"
 
 
 class PhoneDepth(DepthSource):
-    """Depth embedded by a phone camera in the photo's JPEG (GDepth or Dynamic Depth, :mod:`.phone_xmp`)."""
+    """Depth embedded by a phone camera in the photo's JPEG (GDepth or Dynamic Depth, :mod:`.phone_xmp`).
 
-    def estimate(self, rgb: np.ndarray, *, photo_path: Optional[PathLike] = None) -> DepthMap:
-        if photo_path is None:
-            raise InputError("depth", "phone depth is read from the photo file; no photo file was given")
-        return embedded_depth_map(photo_path, check_rgb(rgb).shape[:2])
+    It is read from the file's bytes that :func:`~stylize3d_core.io.images.load_image` kept
+    (``LoadedImage.data``); a photo given as an array has none, which is an InputError.
+    """
+
+    def estimate(self, image: LoadedImage) -> PhotoDepth:
+        image = _check_image(image)
+        return PhotoDepth(image.rgb, embedded_depth_map(image))
 
     def describe(self) -> str:
         return "depth embedded in the photo"
@@ -216,33 +209,31 @@ class AutoDepth(DepthSource):
     def __init__(self, prior: PriorSettings = PriorSettings()) -> None:
         self.prior = PriorDepth(prior)
 
-    def estimate(self, rgb: np.ndarray, *, photo_path: Optional[PathLike] = None) -> DepthMap:
-        if photo_path is not None and has_embedded_depth(photo_path):
+    def estimate(self, image: LoadedImage) -> PhotoDepth:
+        image = _check_image(image)
+        if image.data is not None and has_embedded_depth(image.data):
             try:
-                found = embedded_depth_map(photo_path, check_rgb(rgb).shape[:2], required=False)
+                found = embedded_depth_map(image, required=False)
             except InputError as exc:
                 raise InputError(exc.source, f"{exc.problem} (use --depth prior to ignore the embedded depth)") from exc
             if found is not None:
-                return found
-        return self.prior.estimate(rgb)
+                return PhotoDepth(image.rgb, found)
+        return self.prior.estimate(image)
 
     def describe(self) -> str:
         return "auto (phone depth, else the built-in prior)"
 
 
 class RefinedDepth(DepthSource):
-    """Another source followed by edge alignment (:func:`~.refine.refine_depth`)."""
+    """Another source followed by edge alignment (:func:`~.refine.refine_depth`) with the photo it returns."""
 
     def __init__(self, inner: DepthSource, settings: RefineSettings = RefineSettings()) -> None:
         self.inner = inner
         self.settings = settings
 
-    def photo_view(self, rgb: np.ndarray) -> np.ndarray:
-        return self.inner.photo_view(rgb)
-
-    def estimate(self, rgb: np.ndarray, *, photo_path: Optional[PathLike] = None) -> DepthMap:
-        depth = self.inner.estimate(rgb, photo_path=photo_path)
-        return refine_depth(depth, self.inner.photo_view(rgb), self.settings)
+    def estimate(self, image: LoadedImage) -> PhotoDepth:
+        found = self.inner.estimate(image)
+        return PhotoDepth(found.rgb, refine_depth(found.depth_map, found.rgb, self.settings))
 
     def describe(self) -> str:
         return f"{self.inner.describe()} + {self.settings.method}"

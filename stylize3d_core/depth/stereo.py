@@ -27,9 +27,9 @@ import numpy as np
 
 from ..checks import check_choice, check_range
 from ..errors import InputError
-from ..io.depth_files import fill_nearest
 from ..io.images import to_uint8
 from ._util import check_rgb, resize_long_side
+from .fill import fill_nearest
 
 _MODES = {"sgbm": cv2.STEREO_SGBM_MODE_SGBM, "3way": cv2.STEREO_SGBM_MODE_SGBM_3WAY, "hh": cv2.STEREO_SGBM_MODE_HH}
 

@@ -48,3 +48,24 @@ class DepthMap:
     @property
     def shape(self) -> tuple:
         return self.depth.shape
+
+
+@dataclass(frozen=True)
+class PhotoDepth:
+    """What a depth source returns: the photo and its depth, pixel for pixel.
+
+    Attributes:
+        rgb: (H, W, 3) float32 in [0, 1], the photo the depth belongs to: the
+            loaded image itself, except for a side-by-side stereo card, whose
+            left view it is (the card is split once, by the source).
+        depth_map: its :class:`DepthMap`, of the same (H, W).
+    """
+
+    rgb: np.ndarray
+    depth_map: DepthMap
+
+    def __post_init__(self) -> None:
+        check_shape(self.rgb, "rgb", (None, None, 3))
+        if self.rgb.shape[:2] != self.depth_map.shape:
+            raise InputError(self.depth_map.source, f"depth map is {self.depth_map.shape} (H, W) but the photo "
+                                                    f"it belongs to is {self.rgb.shape[:2]}")

@@ -2,7 +2,9 @@
 
 Every photo becomes a :class:`LoadedImage`: ``rgb`` (H, W, 3) float32 sRGB values
 in [0, 1], upright (the EXIF orientation is applied), shrunk so its long side is
-at most ``max_size``. Anything wrong with a file -- missing, a folder, empty,
+at most ``max_size``; it also keeps the file's bytes and its EXIF orientation, so
+that whatever else needs the file (depth embedded by a phone) reads it from
+there instead of opening and parsing the file again. EXIF is parsed here only. Anything wrong with a file -- missing, a folder, empty,
 not an image, truncated, too small, a decompression bomb, an unsupported pixel
 mode -- raises :class:`~stylize3d_core.errors.InputError` naming the file.
 
@@ -22,7 +24,7 @@ import math
 import os
 import struct
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NamedTuple, Optional, Tuple
 
@@ -65,6 +67,16 @@ class LoadedImage:
         original_size: (H, W) of the upright photo before shrinking to ``max_size``.
         bit_depth: 8 or 16, the precision of the source samples (16 for float arrays).
         focal_35mm: the 35 mm-equivalent focal length from EXIF in mm, or None.
+        orientation: the EXIF orientation (1..8) the file was stored with and that
+            was applied to make ``rgb`` upright; 1 when the file has none, and for
+            an in-memory array. Data stored alongside the pixels in the file's
+            orientation (a phone's depth map) is turned upright with
+            ``apply_orientation(data, orientation)``.
+        data: the file's bytes exactly as read (None for an in-memory array), for
+            metadata that is not decoded here, e.g. the XMP in which phones embed a
+            depth map; the file is read once, by :func:`load_image`.
+        format: the file's format as Pillow names it ("JPEG", "PNG", "MPO", "WEBP",
+            "TIFF", ...), or None for an in-memory array.
     """
 
     rgb: np.ndarray
@@ -73,6 +85,13 @@ class LoadedImage:
     original_size: Tuple[int, int]
     bit_depth: int
     focal_35mm: Optional[float]
+    orientation: int = 1
+    data: Optional[bytes] = field(default=None, repr=False, compare=False)
+    format: Optional[str] = None
+
+    def __post_init__(self) -> None:
+        if self.orientation not in range(1, 9):
+            raise InputError(self.path or "image", f"EXIF orientation must be 1..8, got {self.orientation!r}")
 
     @property
     def size(self) -> Tuple[int, int]:
@@ -301,6 +320,7 @@ def load_image(
     except (OSError, ValueError, SyntaxError, struct.error) as e:
         raise InputError(path, f"corrupt image file ({e})") from e
     with im:
+        file_format = im.format
         w, h = im.size
         if w * h > max_pixels:
             raise InputError(path, f"image is {w} x {h} = {w * h} pixels, more than max_pixels={max_pixels}")
@@ -326,7 +346,8 @@ def load_image(
     if rgb.ndim == 2:
         rgb = np.repeat(rgb[..., None], 3, axis=2)  # (H, W, 3)
     a = None if alpha is None else apply_orientation(alpha, orientation).astype(np.float32) / top
-    return _finish(rgb, a, os.fspath(path), path, bits, focal, max_size, min_size)
+    return _finish(rgb, a, os.fspath(path), path, bits, focal, max_size, min_size,
+                   orientation=orientation, data=data, file_format=file_format)
 
 
 def load_image_array(
@@ -370,7 +391,8 @@ def _check_sizes(max_size: int, min_size: int, max_pixels: int) -> None:
     check_range(max_pixels, "max_pixels", 1, float("inf"))
 
 
-def _finish(rgb, alpha, path, source, bits, focal, max_size, min_size) -> LoadedImage:
+def _finish(rgb, alpha, path, source, bits, focal, max_size, min_size, *,
+            orientation: int = 1, data: Optional[bytes] = None, file_format: Optional[str] = None) -> LoadedImage:
     """Check the size, shrink to ``max_size`` (alpha-weighted), build the LoadedImage."""
     h, w = rgb.shape[:2]
     if min(h, w) < min_size:
@@ -390,7 +412,8 @@ def _finish(rgb, alpha, path, source, bits, focal, max_size, min_size) -> Loaded
             safe = np.maximum(a_small, 1e-6)[..., None]
             rgb = np.where(a_small[..., None] > 1e-6, np.clip(premul / safe, 0.0, 1.0), plain)
             alpha = a_small
-    return LoadedImage(rgb.astype(np.float32, copy=False), alpha, path, (int(h), int(w)), bits, focal)
+    return LoadedImage(rgb.astype(np.float32, copy=False), alpha, path, (int(h), int(w)), bits, focal,
+                       orientation, data, file_format)
 
 
 # ---------------------------------------------------------------------------- resize / save

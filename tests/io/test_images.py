@@ -180,6 +180,25 @@ def test_exif_orientation_in_16bit_colour_png(tmp_path):
     img = load_image(tmp_path / "o8.png")
     assert img.bit_depth == 16 and img.original_size == (40, 50)
     np.testing.assert_allclose(img.rgb, upright / 65535.0, atol=1e-7)
+    assert img.orientation == 8 and img.format == "PNG"
+
+
+@pytest.mark.parametrize("orientation", [1, 3, 6, 8])
+def test_loaded_image_keeps_the_orientation_and_the_file_bytes(write_exif_jpeg, quadrants, orientation):
+    path = write_exif_jpeg(f"o{orientation}.jpg", quadrants, orientation)
+    img = load_image(path, max_size=48)  # shrunk: the bytes are still the whole file, as read
+    assert img.orientation == orientation and img.format == "JPEG"
+    assert img.data == path.read_bytes()
+    assert "data=" not in repr(img)  # a photo's bytes are not printed
+    stored = np.asarray(Image.open(path).convert("RGB"))  # data kept in the stored orientation turns upright
+    assert apply_orientation(stored, img.orientation).shape[:2] == img.original_size
+
+
+def test_in_memory_images_have_no_file_metadata(quadrants):
+    img = load_image_array(quadrants)
+    assert img.orientation == 1 and img.data is None and img.format is None and img.path is None
+    with pytest.raises(InputError, match="orientation"):
+        LoadedImage(img.rgb, None, None, img.size, 8, None, orientation=9)
 
 
 # ---------------------------------------------------------------------------- EXIF focal length
