@@ -7,6 +7,7 @@ import torch
 from stylize3d_core.errors import InputError
 from stylize3d_core.io.images import save_image
 from stylize3d_core.models.checkpoint import load_checkpoint, save_checkpoint
+from stylize3d_core.models.scene_geometry import NeighbourhoodConfig
 from stylize3d_core.train.cache import build_dataset
 from stylize3d_core.train.data import DataConfig
 from stylize3d_core.train.trainer import TrainConfig, learning_rate, train
@@ -66,6 +67,15 @@ def test_stage2_trains_stylizer_with_frozen_encoder(data, tmp_path):
     log = _log(out, 2)
     assert {"content", "style", "consistency"} <= set(log[0])
     assert all(np.isfinite(r["total"]) for r in log)
+
+
+def test_training_refuses_data_of_other_neighbourhoods(data, tmp_path):
+    other = tmp_path / "other"
+    build_dataset(other, 1, DataConfig(image_size=(32, 40), scene_textures=3, texture_size=32,
+                                       neighbourhood=NeighbourhoodConfig(k=8)), seed=1)
+    with pytest.raises(InputError, match="neighbourhood.*k 8 vs 16"):
+        train(TrainConfig(stage=1, data_dir=str(other), out_dir=str(tmp_path / "run"), iterations=1, batch_size=1,
+                          threads=1), log=lambda _: None)
 
 
 def test_cosine_schedule_depends_only_on_the_iteration():
