@@ -44,6 +44,7 @@ from ..io.atomic import atomic_path
 from ..models.checkpoint import load_checkpoint, save_checkpoint
 from ..models.efficientnet_lite import EfficientNetLiteFeatures
 from ..models.losses import PerceptualLoss, PerceptualLossConfig, StylizationLoss
+from ..models.style_features import StyleEncoder
 from ..models.stylize3d import ConfigName, ModelConfig, Stylize3DModel
 from ..render.reproject import pairwise_consistency, sample_view
 from .cache import TrainDataset
@@ -172,14 +173,16 @@ class TrainStep(nn.Module):
     """One sample's loss (a module so DDP can wrap it). Runs on the training thread.
 
     The sample's cached geometry is what inference prepares
-    (:func:`~stylize3d_core.models.scene_geometry.prepare_geometry`).
+    (:func:`~stylize3d_core.models.scene_geometry.prepare_geometry`), and the style
+    image goes through :class:`~stylize3d_core.models.style_features.StyleEncoder`
+    as at inference; ``features`` (the frozen CNN) also computes the losses.
     """
 
     def __init__(self, model: Stylize3DModel, features: EfficientNetLiteFeatures, weights: LossWeights,
                  consistency_points: int) -> None:
         super().__init__()
         self.model = model
-        self.features = features
+        self.style_encoder = StyleEncoder(extractor=features)
         self.perceptual = PerceptualLoss(PerceptualLossConfig(), extractor=features)
         self.stylization = StylizationLoss(extractor=features)
         self.weights = weights
@@ -190,7 +193,7 @@ class TrainStep(nn.Module):
         geom = sample.geometry
         content = self.model.encode(geom)  # (M, C)
         if style is not None:
-            maps = self.features(style.unsqueeze(0))
+            maps = self.style_encoder(style.unsqueeze(0)).maps
             feats = self.model.stylizer.stylize(content, maps)
         else:
             maps, feats = None, content
