@@ -4,7 +4,7 @@ For each image size and sample kind ("ldi": pseudo views of a photo's LDI, with
 prior or random depth; "procedural": ray-cast scenes with true novel views) it
 generates ``--samples`` samples and prints the median seconds per sample, the
 median number of points, the median share of the time spent on each step (depth,
-scene ray casting, LDI, targets, encoder hierarchy), the bytes one cached sample
+scene ray casting, LDI, targets, model geometry), the bytes one cached sample
 takes on disk, and the projected minutes for 2000 samples at the default mix
 (25 % procedural). Torch runs on one thread, as ``build_dataset`` does by default.
 
@@ -26,7 +26,7 @@ from stylize3d_core.train.data import DataConfig, make_sample
 from stylize3d_core.train.styles import StyleBankConfig, build_style_bank
 
 SIZES = ((128, 128), (160, 160))
-STEPS = ("depth", "scene", "ldi", "targets", "hierarchy")
+STEPS = ("depth", "scene", "ldi", "targets", "geometry")
 
 
 def main() -> None:

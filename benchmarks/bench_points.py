@@ -28,7 +28,8 @@ import numpy as np
 import torch
 
 from stylize3d_core.eval.timing import median_time, peak_rss_gib
-from stylize3d_core.models.encoder import Encoder, EncoderConfig, build_hierarchy
+from stylize3d_core.models.encoder import Encoder, EncoderConfig
+from stylize3d_core.models.scene_geometry import NeighbourhoodConfig, build_hierarchy
 from stylize3d_core.points import ball_query, farthest_point_sample, three_nn
 
 
@@ -86,20 +87,20 @@ def main() -> None:
         torch.set_num_threads(args.threads)
 
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads; median of {args.repeats} runs, seconds")
-    cfg, lite = EncoderConfig.paper(), EncoderConfig.lite()
-    enc, enc_lite = Encoder(cfg).eval(), Encoder(lite).eval()
+    hood = NeighbourhoodConfig()
+    enc, enc_lite = Encoder(EncoderConfig.paper()).eval(), Encoder(EncoderConfig.lite()).eval()
     ball_query(torch.rand(10, 3), torch.rand(10, 3), 0.1, 4)  # import Open3D outside the timings
     for n in args.sizes:
         xyz = photo_cloud(n)
         rgb = torch.rand(n, 3)
-        r, k = cfg.stem_radius, cfg.k
+        r, k = hood.stem_radius, hood.k
         t_fps = median_time(lambda: farthest_point_sample(xyz, n // 4), args.repeats)
         t_bq = median_time(lambda: ball_query(xyz, xyz, r, k), args.repeats)
         fill = float(ball_query(xyz, xyz, r, k).count.float().mean())
         sparse = xyz[farthest_point_sample(xyz, max(1, n // 16))]
         t_3nn = median_time(lambda: three_nn(xyz, sparse), args.repeats)
-        t_build = median_time(lambda: build_hierarchy(xyz, cfg), args.repeats)
-        hier = build_hierarchy(xyz, cfg)
+        t_build = median_time(lambda: build_hierarchy(xyz, hood), args.repeats)
+        hier = build_hierarchy(xyz, hood)
         with torch.inference_mode():
             t_enc = median_time(lambda: enc(rgb, hier), args.repeats)
             t_lite = median_time(lambda: enc_lite(rgb, hier), args.repeats)

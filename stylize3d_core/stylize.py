@@ -35,7 +35,8 @@ from .geometry.camera import Cameras
 from .models.adaattn import blend
 from .models.checkpoint import Checkpoint, load_checkpoint
 from .models.style_features import StyleEncoder
-from .models.stylize3d import Stylize3DModel, prepare_geometry
+from .models.scene_geometry import SceneGeometry, prepare_geometry
+from .models.stylize3d import Stylize3DModel
 from .render.plain import preview_point_count, random_order
 from .scene.photo3d import Photo3D
 
@@ -98,8 +99,8 @@ class Stylized3DPhoto:
         t0 = time.perf_counter()
         pts = photo.points.to_tensors()
         with torch.inference_mode():
-            self._geom = prepare_geometry(pts.xyz, pts.rgb, photo.fov_y_deg, photo.size, self.model.config,
-                                          seed=settings.seed)
+            self._geom = prepare_geometry(pts.xyz, pts.rgb, photo.fov_y_deg, photo.size,
+                                          self.model.config.neighbourhood, seed=settings.seed)
             t1 = time.perf_counter()
             self._content = self.model.encode(self._geom)  # (M, C)
         t2 = time.perf_counter()
@@ -109,6 +110,11 @@ class Stylized3DPhoto:
         self._dense: Optional[torch.Tensor] = None  # (N, Cr) in self._order
         self._strength = settings.strength
         self.timings.update({"geometry": t1 - t0, "encode": t2 - t1})
+
+    @property
+    def geometry(self) -> SceneGeometry:
+        """The photo's prepared geometry (NDC, encoder subset, hierarchy, upsampling weights), in point order."""
+        return self._geom
 
     @property
     def num_points(self) -> int:

@@ -40,7 +40,6 @@ from ..models.checkpoint import Checkpoint, load_checkpoint
 from ..models.stylize3d import Stylize3DModel
 from ..train.cache import TrainDataset
 from ..train.data import KINDS, TrainSample
-from ..train.trainer import geometry_from_sample
 
 PSNR_MSE_FLOOR = 1e-10
 """Smallest MSE used in PSNR (identical images score 100 dB, not infinity)."""
@@ -166,7 +165,7 @@ def predict_views(model: Stylize3DModel, sample: TrainSample) -> torch.Tensor:
     """The model's renders (V, 3, H, W) in [0, 1] of a sample's target cameras, without a style."""
     H, W = sample.image_size
     with torch.inference_mode():
-        geom = geometry_from_sample(sample)
+        geom = sample.geometry
         dense = model.dense_features(model.encode(geom), geom)  # (N, Cr)
         views = [model.render_view(dense, geom.xyz, sample.cameras[v], H, W)[0] for v in range(len(sample.cameras))]
         return torch.nan_to_num(torch.stack(views), nan=0.0).clamp(0.0, 1.0)

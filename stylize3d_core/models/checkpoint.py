@@ -3,10 +3,16 @@
 A checkpoint is one ``.safetensors`` file. Its metadata holds::
 
     format   "stylize3d-model"
-    version  "1"
+    version  "2"
     config   the ModelConfig as JSON (so the file alone rebuilds the model)
     stage    "1" (view synthesis) or "2" (stylization)
     info     free JSON: iterations, data, command, hours...
+
+Version "1" files (the shipped checkpoint among them) are still read: their
+config kept the neighbourhood settings (k, radii, down-sampling, FPS start)
+inside ``encoder`` and the subset size as ``encoder_max_points``;
+:func:`config_from_json` maps them to ``neighbourhood``, with the settings that
+were fixed then (512 reference points across, 3-NN upsampling).
 
 Loading checks everything and raises :class:`InputError` naming the file for a
 missing or truncated file, a file that is not a stylize3d checkpoint, or weights
@@ -28,10 +34,13 @@ from ..io.atomic import atomic_path
 from .adaattn import AdaAttNConfig
 from .decoder import DecoderConfig
 from .encoder import EncoderConfig
+from .scene_geometry import NeighbourhoodConfig
 from .stylize3d import ModelConfig, Stylize3DModel
 
 FORMAT = "stylize3d-model"
-VERSION = "1"
+VERSION = "2"
+READABLE_VERSIONS = ("1", "2")
+_V1_NEIGHBOURHOOD = ("k", "stem_radius", "stage_radii", "downsample", "fps_start")
 PathLike = Union[str, "os.PathLike[str]"]
 
 
@@ -54,18 +63,30 @@ def _tuples(x: Any) -> Any:
     return x
 
 
-def config_from_json(text: str, source: PathLike) -> ModelConfig:
-    """Rebuild a :class:`ModelConfig` from :func:`config_to_json`'s output."""
+def _v1_layout(d: Dict[str, Any]) -> Dict[str, Any]:
+    """A version-1 config dict in the version-2 layout (neighbourhood settings out of ``encoder``)."""
+    enc = dict(d["encoder"])
+    hood = {k: enc.pop(k) for k in _V1_NEIGHBOURHOOD if k in enc}
+    hood["max_points"] = d["encoder_max_points"]
+    rest = {k: v for k, v in d.items() if k != "encoder_max_points"}
+    return {**rest, "encoder": enc, "neighbourhood": hood}
+
+
+def config_from_json(text: str, source: PathLike, version: str = VERSION) -> ModelConfig:
+    """Rebuild a :class:`ModelConfig` from :func:`config_to_json`'s output (``version`` "1": the old layout)."""
     try:
         d = json.loads(text)
+        if version == "1":
+            d = _v1_layout(d)
         enc = EncoderConfig(**{k: _tuples(v) for k, v in d["encoder"].items()})
+        hood = NeighbourhoodConfig.from_dict(d["neighbourhood"], source)
         sty = AdaAttNConfig(**{k: _tuples(v) for k, v in d["stylizer"].items()})
         dec = DecoderConfig(**d["decoder"])
         return ModelConfig(
-            name=d["name"], encoder=enc, stylizer=sty, raster_channels=int(d["raster_channels"]),
-            decoder=dec, encoder_max_points=int(d["encoder_max_points"]),
+            name=d["name"], encoder=enc, neighbourhood=hood, stylizer=sty, raster_channels=int(d["raster_channels"]),
+            decoder=dec,
         )
-    except (ValueError, KeyError, TypeError) as e:
+    except (ValueError, KeyError, TypeError, AttributeError) as e:
         raise InputError(source, f"the checkpoint's model configuration is unreadable ({e})") from None
 
 
@@ -108,9 +129,10 @@ def load_checkpoint(path: PathLike) -> Checkpoint:
         raise InputError(p, f"not a readable safetensors checkpoint (truncated or corrupt?): {e}") from None
     if meta.get("format") != FORMAT:
         raise InputError(p, f"not a stylize3d model checkpoint (format {meta.get('format')!r})")
-    if meta.get("version") != VERSION:
-        raise InputError(p, f"checkpoint version {meta.get('version')!r} is not supported (expected {VERSION})")
-    config = config_from_json(meta.get("config", ""), p)
+    if meta.get("version") not in READABLE_VERSIONS:
+        raise InputError(p, f"checkpoint version {meta.get('version')!r} is not supported "
+                            f"(expected one of {', '.join(READABLE_VERSIONS)})")
+    config = config_from_json(meta.get("config", ""), p, meta["version"])
     model = Stylize3DModel(config)
     missing, unexpected = [], []
     own = model.state_dict()

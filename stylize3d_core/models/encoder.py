@@ -1,6 +1,7 @@
 """Graph-convolutional point-cloud encoder (the public code's config "r3").
 
-Architecture (defaults of :class:`EncoderConfig`, N input points)::
+Architecture (defaults of :class:`EncoderConfig` and of
+:class:`~stylize3d_core.models.scene_geometry.NeighbourhoodConfig`, N input points)::
 
     stem     MRConv 3 -> 64 on all N points, ball radius 0.015        BN, ReLU
     stage 1  FPS N -> N/4;      MRConv 64 -> 128  (r 0.015, centres among N points)  BN, ReLU
@@ -28,13 +29,15 @@ positions only shape the neighbourhoods. (Set ``in_channels`` to feed more, e.g.
 RGB with xyz appended.)
 
 **Neighbourhoods are computed once.** They depend only on positions, so
-:func:`build_hierarchy` returns a :class:`PointHierarchy` of index tensors that
-can be cached per photo and reused for every style and every training step.
+:func:`~stylize3d_core.models.scene_geometry.build_hierarchy` returns a
+:class:`~stylize3d_core.models.scene_geometry.PointHierarchy` of index tensors
+that can be cached per photo and reused for every style and every training
+step; the encoder needs only as many stages as it has ``stage_channels``.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import NamedTuple, Optional, Tuple
 
 import torch
@@ -43,158 +46,54 @@ from torch import nn
 
 from ..checks import check_finite, check_shape
 from ..errors import InputError
-from ..points import ball_query, farthest_point_sample
+from .scene_geometry import PointHierarchy
+
 
 @dataclass(frozen=True)
 class EncoderConfig:
-    """Settings of :class:`Encoder` and :func:`build_hierarchy`.
+    """Layer widths of :class:`Encoder` (its neighbourhoods are a
+    :class:`~stylize3d_core.models.scene_geometry.NeighbourhoodConfig`).
 
     Attributes:
         in_channels: channels of the input point features (3: RGB, the paper).
         stem_channels: output channels of the stem MRConv (public code: 64).
-        stem_radius: ball radius of the stem, in NDC units (public code: 0.015).
-        stage_channels: output channels of each down-sampling stage (public code: (128, 256)).
-        stage_radii: per stage, the ball radii of its first MRConv (sampled
-            centres among the previous level) and of its second MRConv (within the
-            stage), in NDC units (public code: ((0.015, 0.025), (0.025, 0.05))).
-        downsample: per stage, the FPS factor: a level of n points keeps
-            ``max(1, n // factor)`` (public code: (4, 4)).
-        k: the most neighbours per ball (public code: 16).
+        stage_channels: output channels of each down-sampling stage (public code:
+            (128, 256)); one entry per stage of the neighbourhood config.
         out_relu: apply a ReLU after the final linear layer (public code: no).
-        fps_start: seed of the first FPS pick at every level, clamped to the
-            level's size (see :func:`stylize3d_core.points.farthest_point_sample`); default 0.
     """
 
     in_channels: int = 3
     stem_channels: int = 64
-    stem_radius: float = 0.015
     stage_channels: Tuple[int, ...] = (128, 256)
-    stage_radii: Tuple[Tuple[float, float], ...] = ((0.015, 0.025), (0.025, 0.05))
-    downsample: Tuple[int, ...] = (4, 4)
-    k: int = 16
     out_relu: bool = False
-    fps_start: int = 0
 
     def __post_init__(self) -> None:
         name = "EncoderConfig"
-        for field in ("in_channels", "stem_channels", "k"):
+        for field in ("in_channels", "stem_channels"):
             if getattr(self, field) < 1:
                 raise InputError(f"{name}.{field}", f"must be >= 1, got {getattr(self, field)}")
-        n = len(self.stage_channels)
-        if len(self.stage_radii) != n or len(self.downsample) != n:
-            raise InputError(
-                name,
-                f"stage_channels, stage_radii and downsample need one entry per stage; got "
-                f"{n}, {len(self.stage_radii)} and {len(self.downsample)}",
-            )
         if any(c < 1 for c in self.stage_channels):
             raise InputError(f"{name}.stage_channels", f"must all be >= 1, got {self.stage_channels}")
-        if any(f < 1 for f in self.downsample):
-            raise InputError(f"{name}.downsample", f"must all be >= 1, got {self.downsample}")
-        radii = [self.stem_radius] + [r for pair in self.stage_radii for r in pair]
-        if any(len(pair) != 2 for pair in self.stage_radii) or not all(r > 0 for r in radii):
-            raise InputError(f"{name}.stage_radii", f"need two positive radii per stage, got {self.stage_radii}")
-        if self.fps_start < 0:
-            raise InputError(f"{name}.fps_start", f"must be >= 0, got {self.fps_start}")
 
     @classmethod
     def paper(cls) -> "EncoderConfig":
-        """The public code's config "r3" (the defaults): 64 / 128 / 256 channels, N -> N/16 points."""
+        """The public code's config "r3" (the defaults): 64 / 128 / 256 channels."""
         return cls()
 
     @classmethod
     def lite(cls) -> "EncoderConfig":
-        """Half the channels (32 / 64 / 128), same neighbourhoods: a cheaper CPU variant."""
+        """Half the channels (32 / 64 / 128): a cheaper CPU variant."""
         return cls(stem_channels=32, stage_channels=(64, 128))
+
+    @property
+    def num_stages(self) -> int:
+        """Down-sampling stages; a hierarchy must have as many."""
+        return len(self.stage_channels)
 
     @property
     def out_channels(self) -> int:
         """Channels of the encoder's output features."""
         return self.stage_channels[-1] if self.stage_channels else self.stem_channels
-
-    def neighbourhood_key(self) -> tuple:
-        """The settings a :class:`PointHierarchy` depends on (positions aside)."""
-        return (self.k, self.stem_radius, tuple(self.stage_radii), tuple(self.downsample), self.fps_start)
-
-    def structure_key(self) -> tuple:
-        """The part of :meth:`neighbourhood_key` the encoder's layers depend on: the radii may differ
-        (see :meth:`scaled`), the number of neighbours and levels may not."""
-        return structure_of(self.neighbourhood_key())
-
-    def scaled(self, factor: float) -> "EncoderConfig":
-        """The same encoder with every ball radius multiplied by ``factor`` (> 0).
-
-        The published radii suit a cloud of ~512 points across (the paper's
-        training size); a cloud of ``n`` points across is searched with radii
-        scaled by ``512 / n`` so that every ball spans the same number of points
-        (see :func:`stylize3d_core.models.stylize3d.radius_scale`).
-        """
-        if not factor > 0 or factor != factor or factor == float("inf"):
-            raise InputError("radius scale", f"must be a positive finite number, got {factor!r}")
-        return replace(
-            self,
-            stem_radius=self.stem_radius * factor,
-            stage_radii=tuple((a * factor, b * factor) for a, b in self.stage_radii),
-        )
-
-
-def structure_of(key: tuple) -> tuple:
-    """(k, downsample, fps_start) of a :meth:`EncoderConfig.neighbourhood_key`."""
-    return (key[0], key[3], key[4])
-
-
-class PointHierarchy(NamedTuple):
-    """Sampled levels and neighbourhoods of one point cloud (from :func:`build_hierarchy`).
-
-    Level 0 is the input cloud (N_0 = N points); stage s maps level s to level s + 1.
-    Only positions went into it: reuse it for any features of the same cloud.
-    """
-
-    xyz: Tuple[torch.Tensor, ...]  # per level l: (N_l, 3) float32 NDC positions
-    stem_neighbours: torch.Tensor  # (N_0, k) long, ball of each point among level 0
-    sample_idx: Tuple[torch.Tensor, ...]  # per stage s: (N_{s+1},) long FPS indices into level s
-    down_neighbours: Tuple[torch.Tensor, ...]  # per stage s: (N_{s+1}, k) long, into level s
-    same_neighbours: Tuple[torch.Tensor, ...]  # per stage s: (N_{s+1}, k) long, into level s + 1
-    key: tuple  # EncoderConfig.neighbourhood_key() of the config it was built with
-
-    @property
-    def num_points(self) -> Tuple[int, ...]:
-        """Number of points at each level, N_0 first."""
-        return tuple(x.shape[0] for x in self.xyz)
-
-
-def build_hierarchy(xyz_ndc: torch.Tensor, config: EncoderConfig = EncoderConfig()) -> PointHierarchy:
-    """FPS levels and ball-query neighbourhoods of a point cloud for :class:`Encoder`.
-
-    Args:
-        xyz_ndc: (N, 3) point positions in NDC, N >= 1. Not modified.
-        config: the encoder settings (radii, k, down-sampling factors).
-
-    Returns:
-        :class:`PointHierarchy`; a level of n points has ``max(1, n // factor)``
-        points at the next level, so any N >= 1 works.
-    """
-    check_shape(xyz_ndc, "xyz_ndc", (None, 3))
-    if xyz_ndc.shape[0] == 0:
-        raise InputError("xyz_ndc", "the point cloud is empty")
-    if not torch.is_floating_point(xyz_ndc):
-        raise InputError("xyz_ndc", f"expected a floating-point tensor, got {xyz_ndc.dtype}")
-    check_finite(xyz_ndc, "xyz_ndc")
-    with torch.no_grad():
-        xyz = xyz_ndc.detach().to(device="cpu", dtype=torch.float32).clone()  # (N, 3)
-        levels = [xyz]
-        stem = ball_query(xyz, xyz, config.stem_radius, config.k).idx  # (N, k)
-        samples, down, same = [], [], []
-        for factor, (r_down, r_same) in zip(config.downsample, config.stage_radii):
-            prev = levels[-1]  # (n, 3)
-            m = max(1, prev.shape[0] // factor)
-            idx = farthest_point_sample(prev, m, start=min(config.fps_start, prev.shape[0] - 1))  # (m,)
-            cur = prev.index_select(0, idx)  # (m, 3)
-            samples.append(idx)
-            down.append(ball_query(prev, cur, r_down, config.k).idx)  # (m, k) into prev
-            same.append(ball_query(cur, cur, r_same, config.k).idx)  # (m, k) into cur
-            levels.append(cur)
-    return PointHierarchy(tuple(levels), stem, tuple(samples), tuple(down), tuple(same), config.neighbourhood_key())
 
 
 # ----------------------------------------------------------------------------- functions
@@ -330,7 +229,8 @@ class Encoder(nn.Module):
     """The point-cloud encoder (see the module docstring); holds parameters only.
 
     ``forward(features (N, in_channels), hierarchy) -> EncoderOutput``; build
-    the hierarchy once per cloud with :func:`build_hierarchy` and the same config.
+    the hierarchy once per cloud with
+    :func:`~stylize3d_core.models.scene_geometry.build_hierarchy`.
     """
 
     def __init__(self, config: EncoderConfig = EncoderConfig()) -> None:
@@ -347,11 +247,11 @@ class Encoder(nn.Module):
     def _check(self, features: torch.Tensor, hierarchy: PointHierarchy) -> None:
         if not isinstance(hierarchy, PointHierarchy):
             raise InputError("hierarchy", f"expected a PointHierarchy, got {type(hierarchy).__name__}")
-        if structure_of(hierarchy.key) != self.config.structure_key():
+        if hierarchy.num_stages != self.config.num_stages:
             raise InputError(
                 "hierarchy",
-                f"was built with (k, downsample, fps_start) = {structure_of(hierarchy.key)}, but this encoder "
-                f"uses {self.config.structure_key()}: rebuild it with build_hierarchy(xyz, encoder.config)",
+                f"has {hierarchy.num_stages} down-sampling stages, this encoder {self.config.num_stages}: "
+                "build it with a NeighbourhoodConfig of as many stages",
             )
         check_shape(features, "features", (hierarchy.num_points[0], self.config.in_channels))
         if not torch.is_floating_point(features):

@@ -1,7 +1,7 @@
 """Inverse-distance-weighted (IDW) interpolation from sparse to dense points.
 
-Each dense point takes a weighted mean of the features of its 3 nearest sparse
-points, with weights ``1 / (d + eps)`` normalised to sum to 1 (``d`` the
+Each dense point takes a weighted mean of the features of its k (the paper: 3)
+nearest sparse points, with weights ``1 / (d + eps)`` normalised to sum to 1 (``d`` the
 Euclidean distance). A dense point within ``eps`` of a sparse point takes that
 sparse point's feature exactly (weights ``[1, 0, 0]``), so a zero distance never
 makes an infinity or a NaN.
@@ -9,7 +9,8 @@ makes an infinity or a NaN.
 The work splits in two, because the point positions are fixed for a photo and
 only the features change (with the style, or during training):
 
-* :func:`three_nn` finds the neighbours and weights once (not differentiable);
+* :func:`idw_neighbours` (:func:`three_nn` for k = 3) finds the neighbours and
+  weights once (not differentiable);
 * :func:`interpolate` gathers and blends features with them (differentiable
   with respect to the features), as often as needed.
 """
@@ -29,10 +30,10 @@ IDW_EPS = 1e-8
 
 
 class IDWWeights(NamedTuple):
-    """Neighbours and weights of :func:`three_nn`; reusable for any features."""
+    """Neighbours and weights of :func:`idw_neighbours`; reusable for any features."""
 
-    idx: torch.Tensor  # (N, 3) long, indices into the sparse points, nearest first
-    weight: torch.Tensor  # (N, 3) float32, >= 0, each row sums to 1
+    idx: torch.Tensor  # (N, k) long, indices into the sparse points, nearest first
+    weight: torch.Tensor  # (N, k) float32, >= 0, each row sums to 1
 
 
 def idw_weights(dist: torch.Tensor, eps: float = IDW_EPS) -> torch.Tensor:
@@ -54,26 +55,33 @@ def idw_weights(dist: torch.Tensor, eps: float = IDW_EPS) -> torch.Tensor:
     return torch.where(coincide, one_hot, w).to(dist.dtype)
 
 
-def three_nn(dense: torch.Tensor, sparse: torch.Tensor) -> IDWWeights:
-    """The 3 nearest ``sparse`` points of every ``dense`` point, with IDW weights.
+def idw_neighbours(dense: torch.Tensor, sparse: torch.Tensor, k: int = 3) -> IDWWeights:
+    """The ``k`` nearest ``sparse`` points of every ``dense`` point, with IDW weights.
 
     Args:
         dense: (N, 3) points that receive features.
-        sparse: (M, 3) points that carry features, M >= 1. With M < 3 the
+        sparse: (M, 3) points that carry features, M >= 1. With M < k the
             missing neighbours repeat the nearest one with weight 0.
+        k: neighbours per dense point, >= 1 (the paper: 3, see :func:`three_nn`).
 
     Returns:
-        :class:`IDWWeights` with ``idx`` (N, 3) and ``weight`` (N, 3) float32.
+        :class:`IDWWeights` with ``idx`` (N, k) and ``weight`` (N, k) float32.
     """
-    res = knn(sparse, dense, 3)  # (N, 3) each
-    dist = res.sq_dist.double().clamp_min(0.0).sqrt()  # (N, 3)
-    weight = idw_weights(dist)  # (N, 3) float64
+    res = knn(sparse, dense, k)  # (N, k) each
+    k = res.idx.shape[1]
+    dist = res.sq_dist.double().clamp_min(0.0).sqrt()  # (N, k)
+    weight = idw_weights(dist)  # (N, k) float64
     m = sparse.shape[0]
-    if m < 3:
-        real = torch.arange(3) < m  # (3,)
+    if m < k:
+        real = torch.arange(k) < m  # (k,)
         weight = torch.where(real, weight, torch.zeros_like(weight))
         weight = weight / weight.sum(dim=1, keepdim=True)  # row sums >= weight[:, 0] > 0
     return IDWWeights(res.idx, weight.float())
+
+
+def three_nn(dense: torch.Tensor, sparse: torch.Tensor) -> IDWWeights:
+    """:func:`idw_neighbours` with k = 3: ``idx`` (N, 3) and ``weight`` (N, 3) float32."""
+    return idw_neighbours(dense, sparse, 3)
 
 
 def interpolate(features: torch.Tensor, idx: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:

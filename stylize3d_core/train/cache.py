@@ -1,12 +1,21 @@
 """Disk cache of training samples: ``build_dataset`` writes them, ``TrainDataset`` reads them.
 
-A dataset folder holds ``dataset.json`` (format, seed, the config's ``repr``
-and its hash) and one ``sample_NNNNNN.pt`` per sample: a ``torch.save`` of a
-plain dict of tensors, strings and numbers (load with ``weights_only=True``).
-Colours are stored as uint8 (samples are quantised to 1/255, so the round trip
-is exact), neighbour and sample indices as uint16 (int32 above 65536 points); ``xyz_ndc`` and the
-hierarchy's level positions are recomputed from ``xyz`` and the NDC parameters
-on load (the same functions, bit for bit).
+A dataset folder holds ``dataset.json`` (format, sample format version, seed,
+the config's ``repr`` and its hash, the neighbourhood config by name and its
+key) and one ``sample_NNNNNN.pt`` per sample: a ``torch.save`` of a plain dict
+of tensors, strings and numbers (load with ``weights_only=True``). Colours are
+stored as uint8 (samples are quantised to 1/255, so the round trip is exact),
+the geometry's index tensors (encoder subset, neighbours, FPS samples, upsampling
+neighbours) as uint16 (int32 above 65536 points), the upsampling weights as
+float32, the neighbourhood config as a dict of named fields; the hierarchy's
+level positions are recomputed from ``xyz``, the NDC parameters and the FPS
+indices on load (the same functions, bit for bit).
+
+Sample format version 2 stores the whole
+:class:`~stylize3d_core.models.scene_geometry.SceneGeometry` (version 1 held a
+positional neighbourhood key and no upsampling weights). Older samples are
+refused with an error saying to rebuild; :func:`build_dataset` regenerates them
+in place, and :class:`TrainDataset` refuses a folder written in an older format.
 
 Generation resumes: a sample file that exists, loads and belongs to this
 dataset is kept; a missing one is generated; a corrupt or foreign one is
@@ -35,12 +44,13 @@ from ..errors import InputError, PathLike
 from ..geometry.camera import Cameras
 from ..geometry.ndc import NDCParams, to_ndc
 from ..io.atomic import atomic_path
-from ..models.encoder import EncoderConfig, PointHierarchy, structure_of
+from ..models.scene_geometry import NeighbourhoodConfig, PointHierarchy, SceneGeometry
+from ..points import IDWWeights
 from ..scene.pointcloud import PointTensors
 from .data import KINDS, DataConfig, TrainSample, from_u8, held_out_config, make_sample
 
 SAMPLE_FORMAT = "stylize3d-train-sample"
-SAMPLE_VERSION = 1
+SAMPLE_VERSION = 2
 MANIFEST = "dataset.json"
 EVAL_SEED_OFFSET = 1_000_003
 """:func:`build_splits` builds the held-out split with ``seed + EVAL_SEED_OFFSET``."""
@@ -70,20 +80,27 @@ def _index_dtype(n: int) -> torch.dtype:
 
 def sample_to_dict(sample: TrainSample, key: str = "") -> Dict[str, object]:
     """The sample as a plain dict of tensors / numbers / strings (see the module docstring)."""
-    h = sample.hierarchy
+    g = sample.geometry
+    h = g.hierarchy
     idx = _index_dtype(sample.num_points)
     return {
         "format": SAMPLE_FORMAT, "version": SAMPLE_VERSION, "config_key": key,
         "kind": sample.kind, "source": sample.source, "seed": sample.seed, "index": sample.index,
-        "fov_y_deg": float(sample.fov_y_deg), "ndc": [float(v) for v in sample.ndc],
+        "fov_y_deg": float(sample.fov_y_deg),
         "image": _u8(sample.image), "xyz": sample.points.xyz.contiguous(), "point_rgb": _u8(sample.points.rgb),
         "label": sample.points.label.contiguous(),
-        "hierarchy": {
+        "geometry": {
+            "ndc": [float(v) for v in g.ndc],
+            "neighbourhood": h.neighbourhood.to_dict(),
+            "neighbourhood_key": h.neighbourhood.key,
+            "scale": float(h.scale),
+            "encoder_idx": g.encoder_idx.to(idx),
             "stem": h.stem_neighbours.to(idx),
             "sample_idx": [t.to(idx) for t in h.sample_idx],
             "down": [t.to(idx) for t in h.down_neighbours],
             "same": [t.to(idx) for t in h.same_neighbours],
-            "key": h.key,
+            "upsample_idx": g.upsample.idx.to(idx),
+            "upsample_weight": g.upsample.weight.to(torch.float32).contiguous(),
         },
         "cam_to_world": sample.cameras.cam_to_world.to(torch.float64),
         "fov": sample.cameras.fov_y_deg.to(torch.float64),
@@ -102,6 +119,39 @@ def _tensor(d: dict, name: str, dtype: torch.dtype, shape: Sequence[Optional[int
     return t
 
 
+def _geometry_from_dict(gd: object, points: PointTensors, source: PathLike) -> SceneGeometry:
+    """The stored :class:`SceneGeometry` of a sample whose points are ``points``."""
+    n = points.xyz.shape[0]
+    idx = _index_dtype(n)
+    try:
+        ndc = NDCParams(*[float(v) for v in gd["ndc"]])
+        hood = NeighbourhoodConfig.from_dict(gd["neighbourhood"], source)
+        if gd.get("neighbourhood_key") != hood.key:
+            raise InputError(source, "the stored neighbourhood key does not match its settings")
+        scale = float(gd["scale"])
+        encoder_idx = _tensor(gd, "encoder_idx", idx, (None,), source).long()
+        stem = _tensor(gd, "stem", idx, (encoder_idx.shape[0], hood.k), source).long()
+        samples = [t.long() for t in gd["sample_idx"]]
+        down = [t.long() for t in gd["down"]]
+        same = [t.long() for t in gd["same"]]
+        if not len(samples) == len(down) == len(same) == hood.num_stages:
+            raise InputError(source, f"the hierarchy has {len(samples)}, {len(down)}, {len(same)} stages, "
+                                     f"its neighbourhood config {hood.num_stages}")
+        levels = [to_ndc(points.xyz, ndc).index_select(0, encoder_idx)]
+        for s in samples:
+            levels.append(levels[-1].index_select(0, s))
+        up = IDWWeights(_tensor(gd, "upsample_idx", idx, (n, hood.upsample_k), source).long(),
+                        _tensor(gd, "upsample_weight", torch.float32, (n, hood.upsample_k), source))
+        if up.idx.numel() and int(up.idx.max()) >= levels[-1].shape[0]:
+            raise InputError(source, "upsampling neighbours index past the coarsest level")
+    except (KeyError, IndexError, RuntimeError, TypeError, ValueError, AttributeError) as e:
+        if isinstance(e, InputError):
+            raise
+        raise InputError(source, f"malformed scene geometry ({type(e).__name__}: {e})") from e
+    hierarchy = PointHierarchy(tuple(levels), stem, tuple(samples), tuple(down), tuple(same), hood, scale)
+    return SceneGeometry(points.xyz, points.rgb, ndc, encoder_idx, hierarchy, up)
+
+
 def sample_from_dict(d: object, source: PathLike = "sample") -> TrainSample:
     """Inverse of :func:`sample_to_dict`; ``source`` names the file in errors."""
     if not isinstance(d, dict) or d.get("format") != SAMPLE_FORMAT:
@@ -109,8 +159,8 @@ def sample_from_dict(d: object, source: PathLike = "sample") -> TrainSample:
     if d.get("version") != SAMPLE_VERSION:
         raise InputError(source, f"sample format version {d.get('version')!r}, expected {SAMPLE_VERSION}: rebuild it")
     try:
-        kind, fov, ndc = str(d["kind"]), float(d["fov_y_deg"]), NDCParams(*[float(v) for v in d["ndc"]])
-        hd, key = d["hierarchy"], tuple(d["hierarchy"]["key"])
+        kind, fov = str(d["kind"]), float(d["fov_y_deg"])
+        gd = d["geometry"]
         meta = (str(d["source"]), int(d["seed"]), int(d["index"]), {str(k): float(v) for k, v in d["timings"].items()})
     except (KeyError, TypeError, ValueError) as e:
         raise InputError(source, f"malformed training sample ({type(e).__name__}: {e})") from e
@@ -127,20 +177,12 @@ def sample_from_dict(d: object, source: PathLike = "sample") -> TrainSample:
     seen = _tensor(d, "seen", torch.bool, (v, h, w), source)
     points = PointTensors(xyz, from_u8(_tensor(d, "point_rgb", torch.uint8, (n, 3), source)),
                           _tensor(d, "label", torch.uint8, (n,), source))
-    xyz_ndc = to_ndc(xyz, ndc)
+    geometry = _geometry_from_dict(gd, points, source)
     try:
-        stem = _tensor(hd, "stem", _index_dtype(n), (n, None), source).long()
-        samples = [t.long() for t in hd["sample_idx"]]
-        down = [t.long() for t in hd["down"]]
-        same = [t.long() for t in hd["same"]]
-        levels = [xyz_ndc.detach().clone()]
-        for idx in samples:
-            levels.append(levels[-1].index_select(0, idx))
         cameras = Cameras(c2w, _tensor(d, "fov", torch.float64, (v,), source))
-    except (IndexError, RuntimeError, TypeError, AttributeError, InputError) as e:
-        raise InputError(source, f"malformed point hierarchy or cameras ({e})") from e
-    hierarchy = PointHierarchy(tuple(levels), stem, tuple(samples), tuple(down), tuple(same), key)
-    return TrainSample(kind, from_u8(image), points, xyz_ndc, ndc, hierarchy, fov, cameras, from_u8(targets),
+    except (RuntimeError, TypeError, AttributeError) as e:
+        raise InputError(source, f"malformed cameras ({e})") from e
+    return TrainSample(kind, from_u8(image), points, geometry, fov, cameras, from_u8(targets),
                        masks, seen, *meta)
 
 
@@ -193,6 +235,12 @@ def _read_manifest(root: Path) -> Optional[dict]:
     return m
 
 
+def manifest_version(manifest: dict) -> int:
+    """The sample format version a dataset manifest was written with (1: before manifests recorded it)."""
+    v = manifest.get("sample_version", 1)
+    return v if isinstance(v, int) and not isinstance(v, bool) else -1
+
+
 def build_dataset(
     out_dir: PathLike,
     n_samples: int,
@@ -206,7 +254,8 @@ def build_dataset(
 
     Args:
         out_dir: the dataset folder (created if missing). If it already holds a
-            dataset with another seed or config, InputError is raised (use a new folder).
+            dataset with another seed or config, InputError is raised (use a new folder);
+            one written in an older sample format with the same seed is rebuilt in place.
         n_samples: how many samples (an existing dataset can be grown).
         threads: torch threads while generating (restored afterwards); 1 is
             fastest on a busy 2-core machine, where the rasterizer's threads contend.
@@ -218,14 +267,20 @@ def build_dataset(
     root.mkdir(parents=True, exist_ok=True)
     key = config_key(config)
     manifest = _read_manifest(root)
+    if manifest is not None and manifest_version(manifest) != SAMPLE_VERSION and manifest.get("seed") == seed:
+        # Written in another sample format, whose config can no longer be compared: its samples are
+        # all unreadable (each is reported as regenerated below), so the folder is rebuilt in place.
+        manifest = None
     if manifest is not None and (manifest.get("seed") != seed or manifest.get("config_key") != key):
         raise InputError(root / MANIFEST, f"this folder holds the dataset (seed {manifest.get('seed')}, config "
                                           f"{manifest.get('config_key')}), not (seed {seed}, config {key}): "
                                           "use another folder")
     total = max(n_samples, int(manifest["n_samples"]) if manifest else 0)
     with atomic_path(root / MANIFEST) as tmp:
-        tmp.write_text(json.dumps({"format": "stylize3d-train-dataset", "n_samples": total, "seed": seed,
-                                   "config_key": key, "config": repr(config)}, indent=1))
+        tmp.write_text(json.dumps({"format": "stylize3d-train-dataset", "sample_version": SAMPLE_VERSION,
+                                   "n_samples": total, "seed": seed, "config_key": key, "config": repr(config),
+                                   "neighbourhood": config.neighbourhood.to_dict(),
+                                   "neighbourhood_key": config.neighbourhood.key}, indent=1))
     for stale in root.glob(".sample_*.partial.pt"):  # left by a killed run (atomic_path cleans up otherwise)
         stale.unlink()
     t0 = time.perf_counter()
@@ -282,28 +337,35 @@ class TrainDataset(Dataset):
 
     Args:
         root: the dataset folder.
-        encoder: if given, every sample's hierarchy must have been built with
-            neighbourhoods of this config (else InputError when it is read).
+        neighbourhood: if given, the dataset must have been built with this
+            neighbourhood config (a model's ``config.neighbourhood``), compared by its
+            named fields: else InputError, at once from the manifest and again per sample.
 
     ``dataset[i]`` is a :class:`TrainSample`; samples have different numbers
     of points, so use ``collate_fn=collate_samples`` in a DataLoader.
     """
 
-    def __init__(self, root: PathLike, encoder: Optional[EncoderConfig] = None) -> None:
+    def __init__(self, root: PathLike, neighbourhood: Optional[NeighbourhoodConfig] = None) -> None:
         self.root = Path(root)
         manifest = _read_manifest(self.root)
         if manifest is None:
             raise InputError(self.root, f"no {MANIFEST}: not a training dataset (write one with build_dataset)")
+        version = manifest_version(manifest)
+        if version != SAMPLE_VERSION:
+            raise InputError(self.root / MANIFEST, f"written with training-sample format version {version}, this "
+                                                   f"version reads {SAMPLE_VERSION}: rebuild it with build_dataset")
         self.n = int(manifest["n_samples"])
         self.seed = int(manifest["seed"])
         self.config_key = str(manifest["config_key"])
         self.config_repr = str(manifest["config"])
+        self.neighbourhood = NeighbourhoodConfig.from_dict(manifest.get("neighbourhood"), self.root / MANIFEST)
+        if neighbourhood is not None and self.neighbourhood != neighbourhood:
+            raise InputError(self.root, _hood_mismatch(self.neighbourhood, neighbourhood))
         missing = [i for i in range(self.n) if not sample_path(self.root, i).is_file()]
         if missing:
             raise InputError(self.root, f"{len(missing)} of {self.n} samples are missing (first: "
                                         f"{sample_path(self.root, missing[0]).name}); run build_dataset again")
-        # Radii are scaled per sample (models/stylize3d.radius_scale): only the structure must match.
-        self.encoder_key = None if encoder is None else encoder.structure_key()
+        self.required = neighbourhood
 
     def __len__(self) -> int:
         return self.n
@@ -313,10 +375,17 @@ class TrainDataset(Dataset):
             raise IndexError(f"sample index {index} out of range [0, {self.n})")
         path = sample_path(self.root, index)
         sample = load_sample(path)
-        if self.encoder_key is not None and structure_of(sample.hierarchy.key) != self.encoder_key:
-            raise InputError(path, f"hierarchy built for neighbourhoods {sample.hierarchy.key}, the encoder "
-                                   f"uses {self.encoder_key}: rebuild the dataset with this EncoderConfig")
+        built = sample.geometry.neighbourhood
+        if built != self.neighbourhood or (self.required is not None and built != self.required):
+            raise InputError(path, _hood_mismatch(built, self.required or self.neighbourhood))
         return sample
+
+
+def _hood_mismatch(built: NeighbourhoodConfig, wanted: NeighbourhoodConfig) -> str:
+    diff = {k: (v, getattr(wanted, k)) for k, v in built.to_dict().items() if wanted.to_dict()[k] != v}
+    return (f"geometry built with neighbourhood settings {built.key}, the model uses {wanted.key} "
+            f"(differing: {', '.join(f'{k} {a!r} vs {b!r}' for k, (a, b) in diff.items())}): "
+            "rebuild the dataset with DataConfig(neighbourhood=model.config.neighbourhood)")
 
 
 def collate_samples(batch: Sequence[TrainSample]) -> List[TrainSample]:

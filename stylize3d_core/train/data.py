@@ -2,8 +2,10 @@
 
 A :class:`TrainSample` holds everything one training example needs: the source
 image, its LDI point cloud (world = source camera frame, scene units), the
-points in NDC with the encoder's precomputed :class:`PointHierarchy`, ``V``
-target cameras and their target images with masks. Two kinds:
+model's :class:`~stylize3d_core.models.scene_geometry.SceneGeometry` of it (made
+by :func:`~stylize3d_core.models.scene_geometry.prepare_geometry`, the function
+inference uses, with the config's :class:`NeighbourhoodConfig`), ``V`` target
+cameras and their target images with masks. Two kinds:
 
 * ``"ldi"`` -- a *pseudo* novel view, as in the paper: a random crop / scale /
   flip / colour jitter of a real photo (:mod:`.photos`), depth from the
@@ -46,10 +48,8 @@ from ..checks import check_choice, check_range
 from ..depth.prior import estimate_prior
 from ..errors import InputError
 from ..geometry.camera import Cameras
-from ..geometry.ndc import NDCParams, ndc_params, to_ndc
 from ..io.images import to_uint8
-from ..models.encoder import EncoderConfig, PointHierarchy, build_hierarchy
-from ..models.stylize3d import radius_scale
+from ..models.scene_geometry import NeighbourhoodConfig, SceneGeometry, prepare_geometry
 from ..render.holes import fill_holes
 from ..render.rasterize import RasterSettings
 from ..render.rasterizer import PointRasterizer
@@ -134,8 +134,9 @@ class DataConfig:
     """Crop / flip / colour jitter of the photos."""
     ldi: LDISettings = field(default_factory=LDISettings)
     """How the LDI is built (the product's defaults)."""
-    encoder: EncoderConfig = field(default_factory=EncoderConfig)
-    """The encoder whose neighbourhoods are precomputed (the paper's config by default)."""
+    neighbourhood: NeighbourhoodConfig = field(default_factory=NeighbourhoodConfig)
+    """The geometry precomputed for the model (the paper's by default); it must equal the
+    trained model's ``config.neighbourhood``."""
     target_supersample: int = 1
     """Supersampling of the ``"ldi"`` target rasterization (1 or 2). 1: at 2x, a surface
     magnified by forward motion (z up to +0.15 at the near depth 1/3, ~1.8x) spreads its
@@ -152,6 +153,9 @@ class DataConfig:
     """Probability that a scene texture is a photo crop rather than a procedural texture."""
 
     def __post_init__(self) -> None:
+        if not isinstance(self.neighbourhood, NeighbourhoodConfig):
+            got = type(self.neighbourhood).__name__
+            raise InputError("neighbourhood", f"expected a NeighbourhoodConfig, got {got}")
         if len(self.image_size) != 2 or not all(isinstance(s, int) and 32 <= s <= 1024 for s in self.image_size):
             raise InputError("image_size", f"expected (H, W) integers in [32, 1024], got {self.image_size!r}")
         check_range(self.procedural_fraction, "procedural_fraction", 0.0, 1.0)
@@ -185,9 +189,9 @@ class TrainSample(NamedTuple):
         image: (H, W, 3) float32 source image in [0, 1].
         points: the LDI point cloud: ``xyz`` (N, 3) float32 world (= source
             camera frame, scene units), ``rgb`` (N, 3) float32, ``label`` (N,) uint8.
-        xyz_ndc: (N, 3) float32 the points in NDC (``to_ndc(points.xyz, ndc)``).
-        ndc: the NDC parameters (source FOV, aspect W / H).
-        hierarchy: the encoder's FPS levels and neighbourhoods of ``xyz_ndc``.
+        geometry: ``prepare_geometry(points.xyz, points.rgb, fov_y_deg, image_size,
+            config.neighbourhood)``: NDC parameters, encoder subset, FPS / ball-query
+            hierarchy and upsampling weights, exactly as inference prepares them.
         fov_y_deg: the source camera's vertical FOV (its pose is the identity).
         cameras: the V target cameras.
         targets: (V, 3, H, W) float32 target images in [0, 1].
@@ -201,9 +205,7 @@ class TrainSample(NamedTuple):
     kind: str
     image: torch.Tensor
     points: PointTensors
-    xyz_ndc: torch.Tensor
-    ndc: NDCParams
-    hierarchy: PointHierarchy
+    geometry: SceneGeometry
     fov_y_deg: float
     cameras: Cameras
     targets: torch.Tensor
@@ -337,21 +339,18 @@ def make_sample(
                          .reshape(h, w) for r in views])
     timings["targets"] = time.perf_counter() - t0
 
-    xyz = torch.from_numpy(cloud.xyz.copy())
-    ndc = ndc_params(xyz[:, 2], fov, w / h)
-    xyz_ndc = to_ndc(xyz, ndc)
+    points = PointTensors(torch.from_numpy(cloud.xyz.copy()), _quantised(cloud.rgb),
+                          torch.from_numpy(cloud.label.copy()))
     t0 = time.perf_counter()
-    # Radii scaled to the crop's resolution, as at inference (see models/stylize3d.radius_scale).
-    hierarchy = build_hierarchy(xyz_ndc, config.encoder.scaled(radius_scale((h, w), 1, 1)))
-    timings["hierarchy"] = time.perf_counter() - t0
+    # seed 0, as Stylized3DPhoto's default: a cloud over max_points is subset as inference would
+    geometry = prepare_geometry(points.xyz, points.rgb, fov, (h, w), config.neighbourhood, seed=0)
+    timings["geometry"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_start
     return TrainSample(
         kind=kind,
         image=torch.from_numpy(image.copy()),
-        points=PointTensors(xyz, _quantised(cloud.rgb), torch.from_numpy(cloud.label.copy())),
-        xyz_ndc=xyz_ndc,
-        ndc=ndc,
-        hierarchy=hierarchy,
+        points=points,
+        geometry=geometry,
         fov_y_deg=fov,
         cameras=cameras,
         targets=_quantised(targets),

@@ -44,8 +44,8 @@ from ..io.atomic import atomic_path
 from ..models.checkpoint import load_checkpoint, save_checkpoint
 from ..models.efficientnet_lite import EfficientNetLiteFeatures
 from ..models.losses import PerceptualLoss, PerceptualLossConfig, StylizationLoss
-from ..models.stylize3d import ConfigName, ModelConfig, SceneGeometry, Stylize3DModel
-from ..points import three_nn
+from ..models.style_features import StyleEncoder
+from ..models.stylize3d import ConfigName, ModelConfig, Stylize3DModel
 from ..render.reproject import pairwise_consistency, sample_view
 from .cache import TrainDataset
 from .data import TrainSample
@@ -155,14 +155,6 @@ def learning_rate(config: TrainConfig, iteration: int) -> float:
     return config.lr
 
 
-def geometry_from_sample(sample: TrainSample) -> SceneGeometry:
-    """The model's :class:`SceneGeometry` of a cached training sample (every point is encoded)."""
-    xyz = sample.points.xyz.float()
-    with torch.no_grad():
-        up = three_nn(sample.xyz_ndc.float(), sample.hierarchy.xyz[-1])
-    return SceneGeometry(xyz, sample.points.rgb.float(), sample.ndc, torch.arange(xyz.shape[0]), sample.hierarchy, up)
-
-
 def consistency_loss(
     points: torch.Tensor, views: List[torch.Tensor], zbuffers: List[torch.Tensor], sample: TrainSample
 ) -> torch.Tensor:
@@ -178,13 +170,19 @@ def consistency_loss(
 
 
 class TrainStep(nn.Module):
-    """One sample's loss (a module so DDP can wrap it). Runs on the training thread."""
+    """One sample's loss (a module so DDP can wrap it). Runs on the training thread.
+
+    The sample's cached geometry is what inference prepares
+    (:func:`~stylize3d_core.models.scene_geometry.prepare_geometry`), and the style
+    image goes through :class:`~stylize3d_core.models.style_features.StyleEncoder`
+    as at inference; ``features`` (the frozen CNN) also computes the losses.
+    """
 
     def __init__(self, model: Stylize3DModel, features: EfficientNetLiteFeatures, weights: LossWeights,
                  consistency_points: int) -> None:
         super().__init__()
         self.model = model
-        self.features = features
+        self.style_encoder = StyleEncoder(extractor=features)
         self.perceptual = PerceptualLoss(PerceptualLossConfig(), extractor=features)
         self.stylization = StylizationLoss(extractor=features)
         self.weights = weights
@@ -192,10 +190,10 @@ class TrainStep(nn.Module):
 
     def forward(self, sample: TrainSample, style: Optional[torch.Tensor], generator: torch.Generator
                 ) -> Dict[str, torch.Tensor]:
-        geom = geometry_from_sample(sample)
+        geom = sample.geometry
         content = self.model.encode(geom)  # (M, C)
         if style is not None:
-            maps = self.features(style.unsqueeze(0))
+            maps = self.style_encoder(style.unsqueeze(0)).maps
             feats = self.model.stylizer.stylize(content, maps)
         else:
             maps, feats = None, content
@@ -291,7 +289,7 @@ def train(config: TrainConfig, log: Log = print) -> Path:
     if state is not None:
         opt.load_state_dict(state["optimizer"])
 
-    data = TrainDataset(config.data_dir)
+    data = TrainDataset(config.data_dir, neighbourhood=model.config.neighbourhood)
     styles = StyleBank(config.styles_dir, max_size=256) if config.stage == 2 else None
     t_start = time.time()
     info = {"stage": config.stage, "config": asdict(config), "data": str(config.data_dir), "samples": len(data)}

@@ -5,6 +5,8 @@ import torch
 
 from stylize3d_core.errors import InputError
 from stylize3d_core.models.checkpoint import config_to_json, load_checkpoint, save_checkpoint
+from stylize3d_core.models.encoder import EncoderConfig
+from stylize3d_core.models.scene_geometry import NeighbourhoodConfig
 from stylize3d_core.models.stylize3d import ModelConfig, Stylize3DModel
 
 
@@ -84,3 +86,55 @@ def test_nan_weights_are_refused(tmp_path):
     path = save_checkpoint(tmp_path / "nan.safetensors", m, 1, {})
     with pytest.raises(InputError, match="NaN"):
         load_checkpoint(path)
+
+
+def _with_metadata(src, dst, **changes):
+    from safetensors import safe_open
+    from safetensors.torch import load_file, save_file
+
+    with safe_open(str(src), framework="pt") as f:
+        meta = f.metadata()
+    save_file(load_file(str(src)), str(dst), metadata={**meta, **changes})
+    return meta
+
+
+def test_version_1_layout_is_mapped_to_the_neighbourhood_config(tmp_path):
+    """Version 1 kept k, radii, down-sampling and FPS start in "encoder" and the subset size at the top."""
+    m = _model()
+    good = save_checkpoint(tmp_path / "m.safetensors", m, 1, {})
+    d = json.loads(config_to_json(m.config))
+    assert d["neighbourhood"] == NeighbourhoodConfig().to_dict()
+    v1 = {k: v for k, v in d.items() if k != "neighbourhood"}
+    v1["encoder"] = {**d["encoder"], "k": 8, "stem_radius": 0.02, "stage_radii": [[0.02, 0.03], [0.03, 0.06]],
+                     "downsample": [4, 2], "fps_start": 1}
+    v1["encoder_max_points"] = 1234
+    old = tmp_path / "v1.safetensors"
+    _with_metadata(good, old, version="1", config=json.dumps(v1, sort_keys=True))
+    ck = load_checkpoint(old)
+    assert ck.model.config.encoder == EncoderConfig.lite()
+    assert ck.model.config.neighbourhood == NeighbourhoodConfig(
+        k=8, stem_radius=0.02, stage_radii=((0.02, 0.03), (0.03, 0.06)), downsample=(4, 2), fps_start=1,
+        reference_points_across=512, upsample_k=3, max_points=1234)
+    for (k, a), (_, b) in zip(m.state_dict().items(), ck.model.state_dict().items()):
+        assert torch.equal(a, b), k
+    # the new layout under the old version number is not silently read
+    bad = tmp_path / "mixed.safetensors"
+    _with_metadata(good, bad, version="1")
+    with pytest.raises(InputError, match="mixed.safetensors.*configuration is unreadable"):
+        load_checkpoint(bad)
+    _with_metadata(good, bad, version="3")
+    with pytest.raises(InputError, match="version '3' is not supported"):
+        load_checkpoint(bad)
+
+
+def test_shipped_version_1_checkpoint_loads_with_the_default_neighbourhoods():
+    from safetensors import safe_open
+
+    from stylize3d_core.pipeline import DEFAULT_MODEL
+
+    with safe_open(str(DEFAULT_MODEL), framework="pt") as f:
+        meta = f.metadata()
+    assert meta["version"] == "1" and "neighbourhood" not in json.loads(meta["config"])
+    config = load_checkpoint(DEFAULT_MODEL).model.config
+    assert config == ModelConfig.lite()
+    assert config.neighbourhood == NeighbourhoodConfig()

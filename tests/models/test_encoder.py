@@ -6,11 +6,11 @@ from stylize3d_core.errors import InputError
 from stylize3d_core.models.encoder import (
     Encoder,
     EncoderConfig,
-    PointHierarchy,
-    build_hierarchy,
     mrconv,
     neighbour_max,
 )
+from stylize3d_core.models.scene_geometry import NeighbourhoodConfig, PointHierarchy, build_hierarchy
+from stylize3d_core.models.stylize3d import ModelConfig
 from stylize3d_core.points.reference import ball_query_reference
 
 
@@ -113,7 +113,7 @@ def test_neighbour_max_bad_indices():
 
 def test_hierarchy_shapes_and_neighbourhoods():
     xyz = dense_patch(4096)
-    cfg = EncoderConfig.paper()
+    cfg = NeighbourhoodConfig()
     h = build_hierarchy(xyz, cfg)
     assert h.num_points == (4096, 1024, 256)
     assert h.stem_neighbours.shape == (4096, 16)
@@ -211,9 +211,9 @@ def test_coincident_points_train_and_eval():
 
 def test_lite_config():
     cfg = EncoderConfig.lite()
-    assert cfg.out_channels == 128 and cfg.neighbourhood_key() == EncoderConfig.paper().neighbourhood_key()
+    assert cfg.out_channels == 128 and ModelConfig.lite().neighbourhood == ModelConfig.paper().neighbourhood
     xyz = dense_patch(1024)
-    h = build_hierarchy(xyz, EncoderConfig.paper())  # same neighbourhoods: reusable
+    h = build_hierarchy(xyz, ModelConfig.paper().neighbourhood)  # same neighbourhoods: reusable
     out = Encoder(cfg).eval()(torch.rand(1024, 3), h)
     assert out.features.shape == (64, 128)
 
@@ -228,8 +228,11 @@ def test_bad_inputs():
         enc(torch.rand(256, 4), h)  # wrong channels
     with pytest.raises(InputError):
         enc(torch.full((256, 3), float("nan")), h)
-    with pytest.raises(InputError):
-        Encoder(EncoderConfig(k=8))(torch.rand(256, 3), h)  # hierarchy built for other settings
+    with pytest.raises(InputError, match="stages"):
+        Encoder(EncoderConfig(stage_channels=(128,)))(torch.rand(256, 3), h)  # hierarchy of 2 stages, encoder 1
+    with pytest.raises(InputError, match="stages"):
+        enc(torch.rand(256, 3), build_hierarchy(xyz, NeighbourhoodConfig(stage_radii=((0.015, 0.025),),
+                                                                          downsample=(4,))))
     with pytest.raises(InputError):
         enc(torch.rand(5, 3), build_hierarchy(torch.rand(5, 3)))  # training needs >= 2 points per level
     with pytest.raises(InputError):
@@ -240,19 +243,35 @@ def test_bad_inputs():
         build_hierarchy(torch.tensor([[0.0, float("inf"), 0.0]]))
 
 
+@pytest.mark.parametrize("kwargs", [dict(stem_channels=0), dict(in_channels=0), dict(stage_channels=(128, 0))])
+def test_config_validation(kwargs):
+    with pytest.raises(InputError):
+        EncoderConfig(**kwargs)
+
+
 @pytest.mark.parametrize(
     "kwargs",
     [
         dict(k=0),
-        dict(stem_channels=0),
-        dict(stage_channels=(128,)),
+        dict(stage_radii=((0.015, 0.025),)),  # one stage of radii, two down-sampling factors
         dict(downsample=(4, 0)),
         dict(stage_radii=((0.01, 0.0), (0.02, 0.03))),
         dict(stage_radii=((0.01,), (0.02, 0.03))),
         dict(stem_radius=-1.0),
+        dict(stem_radius=float("nan")),
         dict(fps_start=-1),
+        dict(upsample_k=0),
+        dict(reference_points_across=0),
+        dict(max_points=8),
+        dict(k=2.5),
     ],
 )
-def test_config_validation(kwargs):
+def test_neighbourhood_config_validation(kwargs):
     with pytest.raises(InputError):
-        EncoderConfig(**kwargs)
+        NeighbourhoodConfig(**kwargs)
+
+
+def test_model_config_needs_as_many_stages_as_the_neighbourhoods():
+    one_stage = NeighbourhoodConfig(stage_radii=((0.015, 0.025),), downsample=(4,))
+    with pytest.raises(InputError, match="stages"):
+        ModelConfig(neighbourhood=one_stage)  # the lite encoder has two stages

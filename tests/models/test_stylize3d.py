@@ -1,21 +1,17 @@
-import numpy as np
 import pytest
 import torch
 
-from stylize3d_core.depth.types import DepthMap
 from stylize3d_core.errors import InputError
 from stylize3d_core.geometry.camera import Cameras
 from stylize3d_core.models.adaattn import AdaAttNConfig
 from stylize3d_core.models.decoder import DecoderConfig
 from stylize3d_core.models.encoder import EncoderConfig
+from stylize3d_core.models.scene_geometry import NeighbourhoodConfig, prepare_geometry, radius_scale
 from stylize3d_core.models.stylize3d import (
     ModelConfig,
     Stylize3DModel,
     count_parameters,
-    prepare_geometry,
-    radius_scale,
 )
-from stylize3d_core.scene.photo3d import Photo3D
 
 TINY = ModelConfig(
     name="lite",
@@ -26,26 +22,17 @@ TINY = ModelConfig(
 )
 
 
-@pytest.fixture(scope="module")
-def cloud():
-    g = np.random.default_rng(0)
-    rgb = g.random((40, 48, 3), dtype=np.float32)
-    depth = np.ones((40, 48), np.float32)
-    depth[10:30, 12:36] = 0.5
-    p = Photo3D.build(rgb, DepthMap(depth, np.ones_like(depth, bool), "metric", "test"))
-    return p.points.to_tensors(), p.fov_y_deg
-
-
 def test_radius_scale():
     assert radius_scale((512, 300), 10, 10) == pytest.approx(1.0)
     assert radius_scale((128, 128), 5, 5) == pytest.approx(4.0)
     # a subset of a quarter of the points is half as dense across
     assert radius_scale((1024, 1024), 250, 1000) == pytest.approx(1.0)
+    assert radius_scale((128, 128), 5, 5, reference_points_across=256) == pytest.approx(2.0)
 
 
 def test_shapes_and_gradients_through_the_whole_model(cloud):
     pts, fov = cloud
-    geom = prepare_geometry(pts.xyz, pts.rgb, fov, (40, 48), TINY)
+    geom = prepare_geometry(pts.xyz, pts.rgb, fov, (40, 48), TINY.neighbourhood)
     n = pts.xyz.shape[0]
     assert geom.upsample.idx.shape == (n, 3)
     model = Stylize3DModel(TINY)
@@ -66,7 +53,7 @@ def test_shapes_and_gradients_through_the_whole_model(cloud):
 
 def test_strength_zero_is_the_content(cloud):
     pts, fov = cloud
-    geom = prepare_geometry(pts.xyz, pts.rgb, fov, (40, 48), TINY)
+    geom = prepare_geometry(pts.xyz, pts.rgb, fov, (40, 48), TINY.neighbourhood)
     model = Stylize3DModel(TINY).eval()
     with torch.no_grad():
         c = model.encode(geom)
@@ -79,13 +66,23 @@ def test_strength_zero_is_the_content(cloud):
 
 def test_encoder_subset_for_large_clouds(cloud):
     pts, fov = cloud
-    cfg = ModelConfig(**{**TINY.__dict__, "encoder_max_points": 500})
-    geom = prepare_geometry(pts.xyz, pts.rgb, fov, (40, 48), cfg, seed=3)
+    hood = NeighbourhoodConfig(max_points=500)
+    geom = prepare_geometry(pts.xyz, pts.rgb, fov, (40, 48), hood, seed=3)
     assert geom.encoder_idx.numel() == 500 and geom.hierarchy.num_points[0] == 500
-    again = prepare_geometry(pts.xyz, pts.rgb, fov, (40, 48), cfg, seed=3)
+    again = prepare_geometry(pts.xyz, pts.rgb, fov, (40, 48), hood, seed=3)
     assert torch.equal(geom.encoder_idx, again.encoder_idx)
+    # the radii are scaled to the subset's density
+    assert geom.hierarchy.scale == pytest.approx(radius_scale((40, 48), 500, pts.xyz.shape[0]))
     # every point still gets features through the 3-NN upsampling
     assert geom.upsample.idx.shape[0] == pts.xyz.shape[0]
+
+
+def test_encode_refuses_geometry_of_other_neighbourhoods(cloud):
+    pts, fov = cloud
+    model = Stylize3DModel(TINY).eval()
+    other = prepare_geometry(pts.xyz, pts.rgb, fov, (40, 48), NeighbourhoodConfig(k=8))
+    with pytest.raises(InputError, match="neighbourhood"):
+        model.encode(other)
 
 
 def test_config_checks():

@@ -2,8 +2,8 @@ import pytest
 import torch
 
 from stylize3d_core.errors import InputError
-from stylize3d_core.points import idw_weights, interpolate, three_nn
-from stylize3d_core.points.reference import interpolate_reference, three_nn_reference
+from stylize3d_core.points import idw_neighbours, idw_weights, interpolate, three_nn
+from stylize3d_core.points.reference import interpolate_reference, knn_reference, three_nn_reference
 
 
 def rand(shape, seed, dtype=torch.float32):
@@ -117,3 +117,20 @@ def test_bad_inputs():
         three_nn(rand((10, 3), 19), torch.zeros(0, 3))
     with pytest.raises(InputError):
         three_nn(rand((10, 2), 19), rand((5, 3), 20))
+
+
+@pytest.mark.parametrize("k", [1, 5])
+def test_idw_neighbours_of_any_k_match_the_reference_knn(k):
+    dense, sparse = rand((400, 3), 20), rand((60, 3), 21)
+    res = idw_neighbours(dense, sparse, k)
+    ref = knn_reference(sparse, dense, k)
+    assert res.idx.shape == (400, k) and torch.equal(res.idx, ref.idx)
+    torch.testing.assert_close(res.weight.sum(1), torch.ones(400))
+    if k == 1:
+        assert bool((res.weight == 1).all())  # one neighbour: its feature exactly
+    d = ref.sq_dist.double().sqrt()
+    expected = (1 / (d + 1e-8)) / (1 / (d + 1e-8)).sum(1, keepdim=True)
+    torch.testing.assert_close(res.weight.double(), expected, rtol=1e-5, atol=1e-6)
+    three = three_nn(dense, sparse)
+    again = idw_neighbours(dense, sparse, 3)
+    assert torch.equal(three.idx, again.idx) and torch.equal(three.weight, again.weight)

@@ -1,5 +1,6 @@
 """Training samples (``train/data.py``), their disk cache (``train/cache.py``) and the photos."""
 
+import dataclasses
 import json
 import math
 import os
@@ -12,9 +13,13 @@ from torch.utils.data import DataLoader
 
 from stylize3d_core.errors import InputError
 from stylize3d_core.geometry.ndc import to_ndc
-from stylize3d_core.models.encoder import EncoderConfig, build_hierarchy
-from stylize3d_core.models.stylize3d import radius_scale
+from stylize3d_core.models.scene_geometry import NeighbourhoodConfig, build_hierarchy, radius_scale
+from stylize3d_core.models.checkpoint import Checkpoint
+from stylize3d_core.models.stylize3d import ModelConfig, Stylize3DModel
 from stylize3d_core.scene.ldi import BORDER, INPAINTED, ORIGINAL
+from stylize3d_core.scene.photo3d import Photo3D
+from stylize3d_core.scene.pointcloud import PointCloud
+from stylize3d_core.stylize import Stylized3DPhoto
 from stylize3d_core.train.cache import (
     TrainDataset,
     build_dataset,
@@ -44,19 +49,28 @@ def samples():
 
 def assert_samples_equal(a, b):
     assert (a.kind, a.source, a.seed, a.index, a.fov_y_deg) == (b.kind, b.source, b.seed, b.index, b.fov_y_deg)
-    assert tuple(a.ndc) == tuple(b.ndc)
-    for name in ("image", "xyz_ndc", "targets", "masks", "seen"):
+    for name in ("image", "targets", "masks", "seen"):
         assert torch.equal(getattr(a, name), getattr(b, name)), name
     for x, y in zip(a.points, b.points):
         assert torch.equal(x, y)
     assert torch.equal(a.cameras.cam_to_world, b.cameras.cam_to_world)
     assert torch.equal(a.cameras.fov_y_deg, b.cameras.fov_y_deg)
-    ha, hb = a.hierarchy, b.hierarchy
-    assert ha.key == hb.key
+    assert_geometry_equal(a.geometry, b.geometry)
+
+
+def assert_geometry_equal(ga, gb):
+    """Two SceneGeometry are identical: NDC, subset, every hierarchy tensor and the upsampling weights."""
+    assert tuple(ga.ndc) == tuple(gb.ndc)
+    for name in ("xyz", "rgb", "encoder_idx"):
+        assert torch.equal(getattr(ga, name), getattr(gb, name)), name
+    ha, hb = ga.hierarchy, gb.hierarchy
+    assert ha.neighbourhood == hb.neighbourhood and ha.scale == hb.scale
     assert torch.equal(ha.stem_neighbours, hb.stem_neighbours)
     for fa, fb in ((ha.xyz, hb.xyz), (ha.sample_idx, hb.sample_idx), (ha.down_neighbours, hb.down_neighbours),
                    (ha.same_neighbours, hb.same_neighbours)):
         assert len(fa) == len(fb) and all(torch.equal(x, y) for x, y in zip(fa, fb))
+    assert torch.equal(ga.upsample.idx, gb.upsample.idx)
+    assert torch.equal(ga.upsample.weight, gb.upsample.weight)
 
 
 # ----------------------------------------------------------------------------- cameras
@@ -102,8 +116,11 @@ def test_sample_shapes_and_dtypes(samples, kind):
     assert s.points.label.shape == (n,) and s.points.label.dtype == torch.uint8
     assert set(s.points.label.unique().tolist()) <= {ORIGINAL, INPAINTED, BORDER}
     assert int((s.points.label == ORIGINAL).sum()) == h * w  # one point per photo pixel
-    assert s.xyz_ndc.shape == (n, 3)
-    assert torch.equal(s.xyz_ndc, to_ndc(s.points.xyz, s.ndc))
+    g = s.geometry
+    assert torch.equal(g.xyz, s.points.xyz) and torch.equal(g.rgb, s.points.rgb)
+    assert torch.equal(g.encoder_idx, torch.arange(n))  # small: every point is encoded
+    assert torch.equal(g.hierarchy.xyz[0], to_ndc(s.points.xyz, g.ndc))
+    assert g.upsample.idx.shape == (n, 3) and g.upsample.weight.shape == (n, 3)
     assert len(s.cameras) == v
     assert s.targets.shape == (v, 3, h, w) and s.targets.dtype == torch.float32
     assert s.masks.shape == (v, h, w) and s.masks.dtype == torch.bool
@@ -114,21 +131,54 @@ def test_sample_shapes_and_dtypes(samples, kind):
         assert torch.equal(t * 255, torch.round(t * 255))  # quantised to 1/255
     assert torch.isfinite(s.points.xyz).all() and (s.points.xyz[:, 2] > 0).all()
     assert s.masks.float().mean() > 0.8
-    assert {"ldi", "targets", "hierarchy", "total"} <= set(s.timings)
+    assert {"ldi", "targets", "geometry", "total"} <= set(s.timings)
 
 
 @pytest.mark.parametrize("kind", ["ldi", "procedural"])
 def test_hierarchy_is_build_hierarchy_of_the_points(samples, kind):
     s = samples[kind]
-    scaled = SMALL.encoder.scaled(radius_scale(SMALL.image_size, 1, 1))  # 512 / 48 px across
-    ref = build_hierarchy(s.xyz_ndc, scaled)
-    assert s.hierarchy.key == scaled.neighbourhood_key()
-    assert s.hierarchy.key[1] == pytest.approx(EncoderConfig().stem_radius * 512 / 48)
-    assert s.hierarchy.num_points == ref.num_points
-    assert torch.equal(s.hierarchy.stem_neighbours, ref.stem_neighbours)
-    for a, b in zip(s.hierarchy.sample_idx + s.hierarchy.down_neighbours + s.hierarchy.same_neighbours,
+    h = s.geometry.hierarchy
+    scale = radius_scale(SMALL.image_size, 1, 1)  # 512 / 48 px across
+    ref = build_hierarchy(h.xyz[0], SMALL.neighbourhood, scale)
+    assert h.neighbourhood == SMALL.neighbourhood == NeighbourhoodConfig()
+    assert h.scale == pytest.approx(512 / 48)
+    assert h.neighbourhood.radii(h.scale)[0] == pytest.approx(NeighbourhoodConfig().stem_radius * 512 / 48)
+    assert h.num_points == ref.num_points
+    assert torch.equal(h.stem_neighbours, ref.stem_neighbours)
+    for a, b in zip(h.sample_idx + h.down_neighbours + h.same_neighbours,
                     ref.sample_idx + ref.down_neighbours + ref.same_neighbours):
         assert torch.equal(a, b)
+
+
+def _photo_of(sample):
+    """The sample's point cloud as the Photo3D an inference run would hold."""
+    cloud = PointCloud(sample.points.xyz.numpy(), sample.points.rgb.numpy(), sample.points.label.numpy(),
+                       sample.image_size, sample.fov_y_deg)
+    return Photo3D(sample.image.numpy(), None, None, cloud, sample.fov_y_deg, {})
+
+
+@pytest.mark.parametrize("kind", ["ldi", "procedural"])
+def test_training_geometry_is_the_inference_geometry(samples, kind, tmp_path):
+    """Inference (Stylized3DPhoto of the same cloud) and training (the sample, fresh and cached) agree exactly."""
+    s = samples[kind]
+    model = Stylize3DModel(ModelConfig.lite())
+    inference = Stylized3DPhoto(_photo_of(s), Checkpoint(model, 1, {})).geometry
+    assert_geometry_equal(inference, s.geometry)
+    save_sample(tmp_path / "s.pt", s)
+    assert_geometry_equal(inference, load_sample(tmp_path / "s.pt").geometry)
+    # and the model encodes both to the same features
+    with torch.inference_mode():
+        assert torch.equal(model.eval().encode(inference), model.encode(s.geometry))
+
+
+def test_training_geometry_subsets_large_clouds_as_inference_does(samples):
+    hood = NeighbourhoodConfig(max_points=500)
+    s = make_sample(3, dataclasses.replace(SMALL, neighbourhood=hood), seed=11, kind="ldi")
+    assert s.geometry.encoder_idx.numel() == 500 < s.num_points
+    assert s.geometry.hierarchy.scale == pytest.approx(radius_scale(SMALL.image_size, 500, s.num_points))
+    model = Stylize3DModel(dataclasses.replace(ModelConfig.lite(), neighbourhood=hood))
+    assert_geometry_equal(Stylized3DPhoto(_photo_of(s), Checkpoint(model, 1, {})).geometry, s.geometry)
+    assert_samples_equal(s._replace(geometry=samples["ldi"].geometry), samples["ldi"])  # only the geometry differs
 
 
 def test_same_seed_same_sample_other_index_other_sample(samples):
@@ -227,7 +277,7 @@ def dataset_dir(tmp_path_factory):
 
 
 def test_build_dataset_writes_what_make_sample_makes(dataset_dir):
-    ds = TrainDataset(dataset_dir, encoder=EncoderConfig())
+    ds = TrainDataset(dataset_dir, neighbourhood=NeighbourhoodConfig())
     assert len(ds) == 3 and ds.seed == 4
     assert_samples_equal(ds[1], make_sample(1, SMALL, seed=4))
     loader = DataLoader(ds, batch_size=2, collate_fn=collate_samples)
@@ -253,13 +303,61 @@ def test_build_dataset_resumes_and_regenerates_corrupt_files(dataset_dir, tmp_pa
     assert len(TrainDataset(dataset_dir)) == 4
 
 
+def _as_version_1(d):
+    """A sample dict in the version-1 layout (positional hierarchy key, no upsampling weights)."""
+    g = d.pop("geometry")
+    hood = g["neighbourhood"]
+    r = g["scale"]
+    key = (hood["k"], hood["stem_radius"] * r, [[a * r, b * r] for a, b in hood["stage_radii"]],
+           hood["downsample"], hood["fps_start"])
+    d["ndc"] = g["ndc"]
+    d["hierarchy"] = {"stem": g["stem"], "sample_idx": g["sample_idx"], "down": g["down"], "same": g["same"],
+                      "key": key}
+    d["version"] = 1
+    return d
+
+
+def test_old_format_samples_are_detected_and_regenerated(dataset_dir, tmp_path):
+    dataset_dir = shutil.copytree(dataset_dir, tmp_path / "ds")
+    path = sample_path(dataset_dir, 2)
+    torch.save(_as_version_1(torch.load(path, weights_only=True)), path)
+    with pytest.raises(InputError, match=f"{path.name}.*version 1, expected 2"):
+        load_sample(path)
+    report = build_dataset(dataset_dir, 3, SMALL, seed=4)
+    assert (report.generated, report.skipped) == (0, 2)
+    assert [(os.path.basename(p), "version 1" in why) for p, why in report.regenerated] == [(path.name, True)]
+    assert_samples_equal(load_sample(path), make_sample(2, SMALL, seed=4))
+
+
+def test_old_format_dataset_folders_are_refused_or_rebuilt(dataset_dir, tmp_path):
+    dataset_dir = shutil.copytree(dataset_dir, tmp_path / "ds")
+    manifest = json.loads((dataset_dir / "dataset.json").read_text())
+    assert manifest["sample_version"] == 2
+    assert manifest["neighbourhood"] == NeighbourhoodConfig().to_dict()  # by name
+    assert manifest["neighbourhood_key"] == NeighbourhoodConfig().key
+    # as an older version wrote it: no sample format, another config key, version-1 samples
+    old = {k: v for k, v in manifest.items() if k not in ("sample_version", "neighbourhood", "neighbourhood_key")}
+    (dataset_dir / "dataset.json").write_text(json.dumps({**old, "config_key": "0123456789abcdef"}))
+    for i in range(3):
+        path = sample_path(dataset_dir, i)
+        torch.save(_as_version_1(torch.load(path, weights_only=True)), path)
+    with pytest.raises(InputError, match="format version 1.*rebuild"):
+        TrainDataset(dataset_dir)
+    with pytest.raises(InputError, match="another folder"):
+        build_dataset(dataset_dir, 3, SMALL, seed=5)  # another dataset: not overwritten
+    report = build_dataset(dataset_dir, 3, SMALL, seed=4)
+    assert (report.generated, report.skipped, len(report.regenerated)) == (0, 0, 3)
+    ds = TrainDataset(dataset_dir, neighbourhood=NeighbourhoodConfig())
+    assert_samples_equal(ds[0], make_sample(0, SMALL, seed=4))
+
+
 def test_dataset_folder_mismatches_are_reported(dataset_dir, tmp_path):
     with pytest.raises(InputError, match="dataset.json.*another folder"):
         build_dataset(dataset_dir, 1, SMALL, seed=5)
     with pytest.raises(InputError, match="no dataset.json"):
         TrainDataset(tmp_path)
-    with pytest.raises(InputError, match="encoder"):
-        TrainDataset(dataset_dir, encoder=EncoderConfig(k=8))[0]
+    with pytest.raises(InputError, match="neighbourhood.*differing: k 16 vs 8"):
+        TrainDataset(dataset_dir, neighbourhood=NeighbourhoodConfig(k=8))
     copy = tmp_path / "copy"
     copy.mkdir()
     (copy / "dataset.json").write_text((dataset_dir / "dataset.json").read_text())

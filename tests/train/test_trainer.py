@@ -7,9 +7,13 @@ import torch
 from stylize3d_core.errors import InputError
 from stylize3d_core.io.images import save_image
 from stylize3d_core.models.checkpoint import load_checkpoint, save_checkpoint
-from stylize3d_core.train.cache import build_dataset
+from stylize3d_core.models.efficientnet_lite import EfficientNetLiteFeatures
+from stylize3d_core.models.scene_geometry import NeighbourhoodConfig
+from stylize3d_core.models.style_features import StyleEncoder
+from stylize3d_core.models.stylize3d import ModelConfig, Stylize3DModel
+from stylize3d_core.train.cache import TrainDataset, build_dataset
 from stylize3d_core.train.data import DataConfig
-from stylize3d_core.train.trainer import TrainConfig, learning_rate, train
+from stylize3d_core.train.trainer import LossWeights, TrainConfig, TrainStep, learning_rate, train
 
 SMALL = DataConfig(image_size=(32, 40), scene_textures=3, texture_size=32)
 
@@ -66,6 +70,34 @@ def test_stage2_trains_stylizer_with_frozen_encoder(data, tmp_path):
     log = _log(out, 2)
     assert {"content", "style", "consistency"} <= set(log[0])
     assert all(np.isfinite(r["total"]) for r in log)
+
+
+def test_training_style_features_are_the_style_encoders(data):
+    """The stylizer sees StyleEncoder's maps of the style image (resized as at inference), nothing else."""
+    sample = TrainDataset(data / "train")[0]
+    features = EfficientNetLiteFeatures(stages=(0, 1, 2, 3, 4))
+    step = TrainStep(Stylize3DModel(ModelConfig.lite()), features, LossWeights(), 64)
+    seen = []
+    stylize = step.model.stylizer.stylize
+    step.model.stylizer.stylize = lambda content, maps: seen.append(maps) or stylize(content, maps)
+    style = torch.rand(3, 40, 48, generator=torch.Generator().manual_seed(0))  # short side < 64: upscaled
+    terms = step(sample, style, torch.Generator().manual_seed(0))
+    assert {"content", "style", "consistency"} == set(terms)
+    with torch.no_grad():
+        expected = StyleEncoder(extractor=features)(style[None])
+    assert expected.size == (64, 77)
+    assert len(seen) == 1 and len(seen[0]) == len(expected.maps)
+    for got, want in zip(seen[0], expected.maps):
+        assert got.shape == want.shape and torch.allclose(got, want)
+
+
+def test_training_refuses_data_of_other_neighbourhoods(data, tmp_path):
+    other = tmp_path / "other"
+    build_dataset(other, 1, DataConfig(image_size=(32, 40), scene_textures=3, texture_size=32,
+                                       neighbourhood=NeighbourhoodConfig(k=8)), seed=1)
+    with pytest.raises(InputError, match="neighbourhood.*k 8 vs 16"):
+        train(TrainConfig(stage=1, data_dir=str(other), out_dir=str(tmp_path / "run"), iterations=1, batch_size=1,
+                          threads=1), log=lambda _: None)
 
 
 def test_cosine_schedule_depends_only_on_the_iteration():

@@ -1,0 +1,100 @@
+"""The shared geometry recipe (``models/scene_geometry.py``) and its neighbourhood config."""
+
+import dataclasses
+
+import pytest
+import torch
+
+from stylize3d_core.errors import InputError
+from stylize3d_core.geometry.ndc import ndc_params, to_ndc
+from stylize3d_core.models.scene_geometry import (
+    NeighbourhoodConfig,
+    build_hierarchy,
+    encoder_subset,
+    prepare_geometry,
+    radius_scale,
+)
+from stylize3d_core.points import idw_neighbours
+from stylize3d_core.points.reference import ball_query_reference, knn_reference
+
+
+def test_config_by_name_round_trips_and_keys_by_field():
+    cfg = NeighbourhoodConfig(k=8, stage_radii=((0.02, 0.03), (0.04, 0.05)), upsample_k=4, max_points=1000)
+    d = cfg.to_dict()
+    assert d["k"] == 8 and d["stage_radii"] == [[0.02, 0.03], [0.04, 0.05]] and d["max_points"] == 1000
+    assert NeighbourhoodConfig.from_dict(d) == cfg
+    assert NeighbourhoodConfig.from_dict(dict(reversed(list(d.items())))).key == cfg.key  # order-free
+    assert NeighbourhoodConfig.from_dict({}) == NeighbourhoodConfig()  # missing fields: the defaults
+    keys = {NeighbourhoodConfig().key}
+    for f in dataclasses.fields(NeighbourhoodConfig):
+        value = getattr(NeighbourhoodConfig(), f.name)
+        other = value * 2 if isinstance(value, float) else value + 1 if isinstance(value, int) else None
+        changed = {"stage_radii": ((0.015, 0.025), (0.025, 0.06)), "downsample": (4, 2)}.get(f.name, other)
+        keys.add(dataclasses.replace(NeighbourhoodConfig(), **{f.name: changed}).key)
+    assert len(keys) == 1 + len(dataclasses.fields(NeighbourhoodConfig))  # every field is in the key
+    with pytest.raises(InputError, match="unknown neighbourhood settings.*'radius'"):
+        NeighbourhoodConfig.from_dict({"radius": 0.1}, "file.json")
+    with pytest.raises(InputError, match="file.json"):
+        NeighbourhoodConfig.from_dict([1, 2], "file.json")
+    with pytest.raises(InputError):
+        NeighbourhoodConfig.from_dict({"k": 0})
+
+
+def test_radii_scale():
+    stem, stages = NeighbourhoodConfig().radii(2.0)
+    assert stem == pytest.approx(0.03)
+    assert [list(p) for p in stages] == [pytest.approx([0.03, 0.05]), pytest.approx([0.05, 0.1])]
+    for bad in (0.0, -1.0, float("inf"), float("nan")):
+        with pytest.raises(InputError, match="radius scale"):
+            NeighbourhoodConfig().radii(bad)
+
+
+def test_scaled_hierarchy_uses_the_scaled_radii():
+    xyz = torch.rand(400, 3, generator=torch.Generator().manual_seed(0)) * 0.2
+    cfg = NeighbourhoodConfig()
+    h = build_hierarchy(xyz, cfg, 2.0)
+    assert h.neighbourhood == cfg and h.scale == 2.0 and h.num_stages == 2
+    assert torch.equal(h.stem_neighbours, ball_query_reference(xyz, xyz, 0.03, 16).idx)
+    assert torch.equal(h.same_neighbours[1], ball_query_reference(h.xyz[2], h.xyz[2], 0.1, 16).idx)
+
+
+def test_prepare_geometry_is_ndc_subset_hierarchy_and_idw(cloud, cloud_size):
+    (pts, fov), size = cloud, cloud_size
+    n = pts.xyz.shape[0]
+    cfg = NeighbourhoodConfig(max_points=600, upsample_k=4)
+    geom = prepare_geometry(pts.xyz, pts.rgb, fov, size, cfg, seed=5)
+    params = ndc_params(pts.xyz[:, 2], fov, size[1] / size[0])
+    ndc = to_ndc(pts.xyz, params)
+    assert tuple(geom.ndc) == tuple(params)
+    idx = encoder_subset(n, 600, 5)
+    assert idx.numel() == 600 and bool((idx[1:] > idx[:-1]).all()) and torch.equal(geom.encoder_idx, idx)
+    scale = radius_scale(size, 600, n)
+    ref = build_hierarchy(ndc[idx], cfg, scale)
+    assert geom.hierarchy.scale == scale and geom.hierarchy.num_points == ref.num_points
+    for a, b in zip((geom.hierarchy.stem_neighbours, *geom.hierarchy.sample_idx, *geom.hierarchy.down_neighbours),
+                    (ref.stem_neighbours, *ref.sample_idx, *ref.down_neighbours)):
+        assert torch.equal(a, b)
+    assert geom.upsample.idx.shape == (n, 4)
+    up = idw_neighbours(ndc, ref.xyz[-1], 4)
+    assert torch.equal(geom.upsample.idx, up.idx) and torch.equal(geom.upsample.weight, up.weight)
+    chosen = (ndc[:, None] - ref.xyz[-1][geom.upsample.idx]).square().sum(-1)  # (n, 4), ties aside the 4-NN
+    torch.testing.assert_close(chosen, knn_reference(ref.xyz[-1], ndc, 4).sq_dist.float(), rtol=1e-4, atol=1e-6)
+    torch.testing.assert_close(geom.upsample.weight.sum(1), torch.ones(n))
+    # the density scaling follows reference_points_across
+    half = prepare_geometry(pts.xyz, pts.rgb, fov, size, dataclasses.replace(cfg, reference_points_across=256), seed=5)
+    assert half.hierarchy.scale == pytest.approx(scale / 2)
+    # below max_points every point is encoded, whatever the seed
+    small = prepare_geometry(pts.xyz, pts.rgb, fov, size, NeighbourhoodConfig(), seed=9)
+    assert torch.equal(small.encoder_idx, torch.arange(n))
+
+
+def test_prepare_geometry_rejects_bad_input(cloud, cloud_size):
+    (pts, fov), size = cloud, cloud_size
+    with pytest.raises(InputError, match="NeighbourhoodConfig"):
+        prepare_geometry(pts.xyz, pts.rgb, fov, size, {"k": 16})
+    with pytest.raises(InputError, match="rgb"):
+        prepare_geometry(pts.xyz, pts.rgb[:-1], fov, size)
+    with pytest.raises(InputError, match="image_size"):
+        prepare_geometry(pts.xyz, pts.rgb, fov, (0, 36))
+    with pytest.raises(InputError, match="NeighbourhoodConfig"):
+        build_hierarchy(pts.xyz, "paper")
