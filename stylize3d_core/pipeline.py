@@ -11,8 +11,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Dict, NamedTuple, Optional, Tuple
 
+import numpy as np
+
 from .errors import InputError
 from .depth.refine import REFINE_METHODS
+from .depth.types import DepthMap
 from .geometry.camera import DEFAULT_FOV_Y_DEG, MAX_FOV_DEG, MIN_FOV_DEG, Cameras, check_fov
 from .geometry.trajectories import TrajectoryName, TrajectorySettings, make_trajectory
 from .io.camera_path import CameraPath, load_camera_path, save_camera_path
@@ -58,6 +61,11 @@ class PhotoSpec:
                                                          "in pixels, before anything else.")
     fov: Optional[float] = option(None, low=MIN_FOV_DEG, high=MAX_FOV_DEG, default_text="from EXIF, else 60",
                                   help="vertical field of view of the photo in degrees.")
+    relief: float = option(1.0, low=0.25, high=4.0,
+                           help="exaggerate (> 1) or flatten (< 1) the 3D relief: each depth d becomes "
+                                "d ** relief before the scene is normalised, so the nearest surface stays put, "
+                                "the photo's own view is unchanged and farther things move away (or closer); "
+                                "1 keeps the depth as estimated.")
     ldi: LDISettings = option(default_factory=LDISettings, cli=False,
                               help="layered-depth-image settings (tearing, hidden layer, border).")
 
@@ -152,6 +160,13 @@ class RenderResult(NamedTuple):
     timings: Dict[str, float]  # seconds per stage
 
 
+def _with_relief(depth_map: DepthMap, relief: float) -> DepthMap:
+    """``depth_map`` with every depth raised to ``relief`` (only ratios are kept: the result is relative)."""
+    d = depth_map.depth.astype(np.float64)
+    scaled = np.exp(relief * (np.log(d) - np.log(np.median(d))))  # about 1 at the median: no overflow
+    return DepthMap(scaled.astype(np.float32), depth_map.valid, "relative", f"{depth_map.source}, relief {relief:g}")
+
+
 def load_photo3d(spec: PhotoSpec, *, log: Log = _quiet) -> Photo3D:
     """Read the photo ``spec`` names, get its depth from the source ``spec.depth`` names (edges
     aligned with the photo's by ``spec.refine_depth``, if given), and build the 3D photo."""
@@ -170,6 +185,8 @@ def load_photo3d(spec: PhotoSpec, *, log: Log = _quiet) -> Photo3D:
     t1 = time.perf_counter()
     rgb = source.photo_view(image.rgb)  # the left half of a side-by-side stereo card, else the photo
     depth_map = source.estimate(image.rgb, photo_path=photo)
+    if spec.relief != 1.0:
+        depth_map = _with_relief(depth_map, spec.relief)
     t2 = time.perf_counter()
     if fov is None:
         fov = image.fov_y_deg() or DEFAULT_FOV_Y_DEG

@@ -70,6 +70,31 @@ def test_refine_depth_changes_the_geometry(photo, tmp_path, capsys):
     assert e.value.code == 2 and "median" in capsys.readouterr().err
 
 
+def test_relief_exaggerates_the_depth_and_keeps_the_photo_view(photo, tmp_path):
+    """--relief k raises every depth to the power k before the scene is normalised: the nearest surface stays
+    at NEAR_DEPTH, so log(z / NEAR_DEPTH) scales by k, and every photo pixel stays on its own ray."""
+    from stylize3d_core.geometry.camera import NEAR_DEPTH
+    from stylize3d_core.scene.pointcloud import ORIGINAL
+
+    common = ["render", str(photo), "--frames", "2", "--size", "48", "--depth", "prior", "-q"]
+    clouds = {}
+    for k in ("1", "2", "0.5"):
+        ply = tmp_path / f"relief{k}.ply"
+        assert main(common + ["--relief", k, "-o", str(tmp_path / f"v{k}.mp4"), "--save-ply", str(ply)]) == 0
+        cloud = read_ply(ply)
+        clouds[k] = cloud.xyz[cloud.labels == ORIGINAL]  # one point per photo pixel, in pixel order
+    base = clouds["1"]
+    for k, cloud in (("2", clouds["2"]), ("0.5", clouds["0.5"])):
+        assert cloud.shape == base.shape
+        spread = np.log(np.median(base[:, 2]) / NEAR_DEPTH)
+        assert spread > 0.1
+        np.testing.assert_allclose(np.log(np.median(cloud[:, 2]) / NEAR_DEPTH), float(k) * spread, rtol=0.1)
+        # Points move along their rays: the photo's own camera sees the same picture.
+        np.testing.assert_allclose(cloud[:, :2] / cloud[:, 2:], base[:, :2] / base[:, 2:], atol=1e-4)
+    assert main(common + ["--relief", "5", "-o", str(tmp_path / "bad.mp4")]) == 2
+    assert not (tmp_path / "bad.mp4").exists()
+
+
 @pytest.mark.parametrize("args, needle", [
     (["render", "{missing}"], "not found"),
     (["render", "{photo}", "--depth", "{missing}"], "missing.png"),
