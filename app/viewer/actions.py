@@ -161,25 +161,24 @@ class PhotoController(Controller):
         self.open_style(str(SAMPLE_STYLE))
         self.open_photo(str(SAMPLE_PHOTO))
 
-    def set_refine_depth(self, method: Optional[str]) -> None:
-        """Choose the depth-edge alignment (None: none) and rebuild the open photo with it."""
+    def change_spec(self, status: str, **changes: Any) -> None:
+        """Change options of the photo spec (e.g. ``depth="prior"``) and rebuild the open photo with them;
+        with no photo open, keep them for the next one and show ``status``."""
         w = self.window
-        spec = replace(w.state.spec, refine_depth=method)
+        spec = replace(w.state.spec, **changes)  # InputError for a bad value: nothing changes
         if spec.photo is None:
             w.state = replace(w.state, spec=spec)
-            w.set_status(f"Depth edges: {method or 'as estimated'}")
+            w.set_status(status)
         else:
             self.load(spec)
 
+    def set_refine_depth(self, method: Optional[str]) -> None:
+        """Choose the depth-edge alignment (None: none) and rebuild the open photo with it."""
+        self.change_spec(f"Depth edges: {method or 'as estimated'}", refine_depth=method)
+
     def set_depth(self, source: str) -> None:
         """Choose the depth source (a spec such as "prior" or a depth file) and rebuild the open photo with it."""
-        w = self.window
-        spec = replace(w.state.spec, depth=source)
-        if spec.photo is None:
-            w.state = replace(w.state, spec=spec)
-            w.set_status(f"Depth source: {source}")
-        else:
-            self.load(spec)
+        self.change_spec(f"Depth source: {source}", depth=source)
 
     # -- widget callbacks --------------------------------------------------------------
     @ui_callback
