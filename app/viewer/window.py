@@ -271,9 +271,9 @@ class ViewerWindow:
         self.panel.status.text = text
 
     def set_busy(self, text: Optional[str], fraction: Optional[float] = None) -> None:
+        """Show ``text`` (if not None) in the status line and ``fraction`` (None: none) on the progress bar."""
         if text is not None:
             self.panel.status.text = text
-        """Show ``text`` (if not None) in the status line and ``fraction`` (None: none) on the progress bar."""
         self.panel.progress.value = 0.0 if fraction is None else float(min(1.0, max(0.0, fraction)))
 
     def file_dialog(self, mode, title: str, filters, on_done: Callable[[str], None]) -> None:
