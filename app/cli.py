@@ -11,57 +11,25 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import List, Optional, get_args
+from typing import List, Optional
 
-from stylize3d_core.depth.refine import REFINE_METHODS
 from stylize3d_core.errors import ExportError, InputError, Stylize3DError
-from stylize3d_core.geometry.trajectories import TrajectoryName
 from stylize3d_core.io.video import ExportCancelled, console_progress
 from stylize3d_core.pipeline import RenderJob, run_render
+
+from .options import add_options, from_args
 
 PROG = "stylize3d"
 
 
 def _add_render(sub: "argparse._SubParsersAction") -> None:
-    d = RenderJob(photo="")
     p = sub.add_parser(
         "render",
         help="render a 3D photo along a camera path into a video",
         description="Turn PHOTO into a 3D photo and render it along a camera path, "
         "painted in the style of --style (or plain without it).",
     )
-    p.add_argument("photo", help="the photo: JPEG, PNG, WebP or TIFF")
-    p.add_argument("--style", default=None, metavar="IMAGE",
-                   help="style image (a painting, a texture); without it the plain 3D photo is rendered")
-    p.add_argument("--strength", type=float, default=d.strength,
-                   help=f"style strength from 0 (photo) to 1 (default {d.strength:g})")
-    p.add_argument("--model", default=d.model, metavar="CHECKPOINT",
-                   help="stylization model (default: the shipped assets/model/stylize3d_lite.safetensors)")
-    p.add_argument("-o", "--output", default=d.output,
-                   help=f"video to write: .mp4, .gif, or a folder (ending in /) for PNG frames (default {d.output})")
-    p.add_argument("--depth", default=d.depth, metavar="SPEC",
-                   help="depth source: auto (default: phone depth, else the built-in prior), prior, "
-                        "a depth file (PNG16/NPY/PFM/TIFF/EXR; append :disparity for disparity), "
-                        "onnx:MODEL.onnx, stereo:RIGHT_IMAGE, stereo:sbs")
-    p.add_argument("--refine-depth", default=None, choices=REFINE_METHODS, metavar="METHOD",
-                   help="align depth edges with the photo's edges first: bilateral_median (sharpens, as "
-                        "3DPhoto), joint_bilateral or guided (smooth); default: no refinement")
-    p.add_argument("--trajectory", default=d.trajectory, choices=get_args(TrajectoryName),
-                   help=f"camera path shape (default {d.trajectory})")
-    p.add_argument("--frames", type=int, default=d.frames, help=f"number of frames (default {d.frames})")
-    p.add_argument("--fps", type=float, default=d.fps, help=f"frames per second (default {d.fps:g})")
-    p.add_argument("--size", type=int, default=d.size,
-                   help=f"long side of the output frames in pixels (default {d.size})")
-    p.add_argument("--max-size", type=int, default=d.max_size,
-                   help=f"shrink the photo so its long side is at most this (default {d.max_size})")
-    p.add_argument("--fov", type=float, default=None,
-                   help="vertical field of view of the photo in degrees (default: from EXIF, else 60)")
-    p.add_argument("--supersample", type=int, choices=(1, 2), default=d.supersample,
-                   help=f"1 = sharp and fast, 2 = smoother when the camera moves away (default {d.supersample})")
-    p.add_argument("--camera-path", default=None, metavar="JSON",
-                   help="follow the cameras of this camera-path JSON instead of --trajectory/--frames")
-    p.add_argument("--save-camera-path", default=None, metavar="JSON", help="also write the cameras used")
-    p.add_argument("--save-ply", default=None, metavar="FILE", help="also write the coloured point cloud (PLY)")
+    add_options(p, RenderJob, positional={"photo": None})  # every option is a RenderJob / PhotoSpec field
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
 
 
@@ -146,14 +114,7 @@ def _train(args: argparse.Namespace) -> int:
 
 
 def _render(args: argparse.Namespace) -> int:
-    job = RenderJob(
-        photo=args.photo, output=args.output, depth=args.depth, refine_depth=args.refine_depth,
-        trajectory=args.trajectory,
-        frames=args.frames, fps=args.fps, size=args.size, max_size=args.max_size, fov=args.fov,
-        supersample=args.supersample, camera_path=args.camera_path,
-        save_camera_path=args.save_camera_path, save_ply=args.save_ply, style=args.style,
-        strength=args.strength, model=args.model,
-    )
+    job = from_args(RenderJob, args)  # InputError (exit 2) for a bad value, before any work
     log = (lambda _msg: None) if args.quiet else (lambda msg: print(f"{PROG}: {msg}", file=sys.stderr))
     progress = None if args.quiet else console_progress("render")
     result = run_render(job, progress=progress, log=log)

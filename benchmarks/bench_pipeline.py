@@ -22,7 +22,7 @@ CHILD = r"""
 import json, sys, time
 import numpy as np
 from PIL import Image
-from stylize3d_core.pipeline import RenderJob, run_render
+from stylize3d_core.pipeline import PhotoSpec, RenderJob, run_render
 photo, long_side, size, frames, out, fmt, depth = sys.argv[1:8]
 img = Image.open(photo).convert("RGB")
 s = int(long_side) / max(img.size)
@@ -30,8 +30,8 @@ img = img.resize((round(img.size[0] * s), round(img.size[1] * s)), Image.LANCZOS
 src = out + ".input.png"
 img.save(src)
 t0 = time.perf_counter()
-res = run_render(RenderJob(photo=src, output=out + "." + fmt, depth=depth, size=int(size),
-                           frames=int(frames), max_size=int(long_side)))
+res = run_render(RenderJob(PhotoSpec(src, depth, max_size=int(long_side)), output=out + "." + fmt,
+                           size=int(size), frames=int(frames)))
 total = time.perf_counter() - t0
 from stylize3d_core.eval.timing import peak_rss_gib
 print(json.dumps({"pixels": img.size[0] * img.size[1], "points": res.n_points, "total": total,

@@ -54,7 +54,7 @@ from stylize3d_core.io.images import load_image
 from stylize3d_core.io.video import write_video
 from stylize3d_core.models.checkpoint import load_checkpoint
 from stylize3d_core.models.style_features import StyleEncoder
-from stylize3d_core.pipeline import load_photo3d
+from stylize3d_core.pipeline import PhotoSpec, load_photo3d
 from stylize3d_core.render.plain import frame_size
 from stylize3d_core.stylize import Stylized3DPhoto
 photo, model, style_a, style_b, out, n_render, video = sys.argv[1:8]
@@ -65,7 +65,7 @@ ck = load_checkpoint(model)
 encoder = StyleEncoder()
 t["model load"] = time.perf_counter() - t0
 t0 = time.perf_counter()
-p3d = load_photo3d(photo, "prior", max_size=1024)
+p3d = load_photo3d(PhotoSpec(photo, "prior", max_size=1024))
 t1 = time.perf_counter()
 st = Stylized3DPhoto(p3d, ck, style_encoder=encoder)
 t2 = time.perf_counter()
@@ -148,11 +148,11 @@ def consistency_report(photo: str, model: str, style: str, n_frames: int, size: 
     from stylize3d_core.geometry.trajectories import circle
     from stylize3d_core.io.images import load_image
     from stylize3d_core.models.losses import style_distance
-    from stylize3d_core.pipeline import load_photo3d
+    from stylize3d_core.pipeline import PhotoSpec, load_photo3d
     from stylize3d_core.render.plain import PlainRenderer, frame_size
     from stylize3d_core.stylize import Stylized3DPhoto
 
-    p3d = load_photo3d(photo, "prior", max_size=1024)
+    p3d = load_photo3d(PhotoSpec(photo, "prior", max_size=1024))
     style_rgb = load_image(style, max_size=512).rgb
     H, W = frame_size(p3d.size, size)
     cams = circle(90, fov_y_deg=p3d.fov_y_deg)[slice(0, n_frames)]

@@ -35,6 +35,7 @@ import torch
 from app.viewer.orbit import OrbitPose, pose_camera
 from app.viewer.session import DEFAULT_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE, ViewerSession
 from app.viewer.state import PreviewSettings, adapt_preview_long_side
+from stylize3d_core.pipeline import PhotoSpec
 from stylize3d_core.render.plain import frame_size
 
 
@@ -103,7 +104,7 @@ def main() -> None:
             save_checkpoint(model, Stylize3DModel(ModelConfig.lite()), 1, {"note": "benchmark only"})
         s = ViewerSession(model)
         t0 = time.perf_counter()
-        info = s.load_photo(str(SAMPLE_PHOTO), "auto", max_size=args.max_size)
+        info = s.load_photo(PhotoSpec(str(SAMPLE_PHOTO), "auto", max_size=args.max_size))
         t_load = time.perf_counter() - t0
         t0 = time.perf_counter()
         s.prepare_stylized()

@@ -7,17 +7,22 @@ setting is a documented dataclass field.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Dict, NamedTuple, Optional, Tuple
 
+import numpy as np
+
 from .errors import InputError
-from .geometry.camera import DEFAULT_FOV_Y_DEG, Cameras, check_fov
+from .depth.refine import REFINE_METHODS
+from .depth.types import DepthMap
+from .geometry.camera import DEFAULT_FOV_Y_DEG, MAX_FOV_DEG, MIN_FOV_DEG, Cameras, check_fov
 from .geometry.trajectories import TrajectoryName, TrajectorySettings, make_trajectory
-from .io.camera_path import load_camera_path, save_camera_path
+from .io.camera_path import CameraPath, load_camera_path, save_camera_path
 from .io.images import load_image
 from .io.ply import write_ply
-from .io.video import Progress, write_video
+from .io.video import MAX_GIF_FPS, Progress, video_kind, write_video
+from .options import check_options, documented, option
 from .render.plain import PlainRenderer, PlainRenderSettings, frame_size
 from .scene.ldi import LDISettings
 from .scene.photo3d import Photo3D, Photo3DSettings
@@ -32,54 +37,117 @@ def _quiet(_: str) -> None:
     return None
 
 
+@documented
 @dataclass(frozen=True)
-class RenderJob:
-    """Render a 3D photo along a camera path into a video.
+class PhotoSpec:
+    """How a photo becomes a 3D photo: the one record :func:`load_photo3d` takes.
 
-    Attributes:
-        photo: the photo (JPEG, PNG, WebP, TIFF).
-        output: the video: ``.mp4``, ``.gif``, or a folder for PNG frames. Default "out.mp4".
-        depth: where depth comes from (see ``stylize3d_core.depth.sources``):
-            "auto" (default: depth embedded by the phone, else the built-in prior),
-            "prior", a depth file, "onnx:MODEL.onnx", "stereo:RIGHT".
-        refine_depth: align the depth's edges with the photo's before building the
-            LDI: None (default), "bilateral_median" (3DPhoto's; sharpens edges),
-            "joint_bilateral" or "guided" (smooth); see ``depth/refine.py``.
-        trajectory: camera path shape (see ``geometry/trajectories.py``). Default "circle".
-        frames: number of frames. Default 90 (3 s at 30 fps, as the paper's code).
-        fps: frames per second of the video. Default 30.
-        size: long side of the output frames in pixels (aspect of the photo). Default 512.
-        max_size: long side the photo is shrunk to before anything else. Default 1024.
-        fov: vertical field of view of the photo in degrees; None (default) takes
-            it from the photo's EXIF focal length, else 60.
-        supersample: 1 (default) or 2: rasterize at twice the size (smoother when zooming out).
-        camera_path: a camera-path JSON to follow instead of ``trajectory``/``frames``.
-        save_camera_path: also write the cameras used to this JSON file.
-        save_ply: also write the coloured point cloud to this PLY file.
-        style: a style image; None (default) renders the plain, unstylized 3D photo.
-        strength: style strength in [0, 1]. Default 0.8.
-        model: the model checkpoint used with ``style``. Default: the shipped lite model.
-        ldi: layered-depth-image settings.
+    :class:`RenderJob` and the viewer's state hold one; both command lines derive
+    their photo options from these fields (``app/options.py``), so a new option
+    is written here once (its help is its documentation), validated here once.
     """
 
-    photo: str
-    output: str = "out.mp4"
-    depth: str = "auto"
-    refine_depth: Optional[str] = None
-    trajectory: TrajectoryName = "circle"
-    frames: int = 90
-    fps: float = 30.0
-    size: int = 512
-    max_size: int = 1024
-    fov: Optional[float] = None
-    supersample: int = 1
-    camera_path: Optional[str] = None
-    save_camera_path: Optional[str] = None
-    save_ply: Optional[str] = None
-    style: Optional[str] = None
-    strength: float = 0.8
-    model: str = DEFAULT_MODEL
-    ldi: LDISettings = field(default_factory=LDISettings)
+    photo: Optional[str] = option(None, help="the photo: JPEG, PNG, WebP or TIFF.", metavar="PHOTO")
+    depth: str = option(
+        "auto", metavar="SPEC",
+        help="where depth comes from: auto (phone depth, else the built-in prior), prior, phone, a depth file "
+             "(PNG16/NPY/PFM/TIFF/EXR; append :disparity for disparity), onnx:MODEL.onnx, stereo:RIGHT_IMAGE, "
+             "stereo:sbs (see stylize3d_core/depth/sources.py).")
+    refine_depth: Optional[str] = option(
+        None, choices=REFINE_METHODS, metavar="METHOD", default_text="no refinement",
+        help="align the depth's edges with the photo's first: bilateral_median (sharpens, as 3DPhoto), "
+             "joint_bilateral or guided (smooth); see depth/refine.py.")
+    max_size: int = option(1024, low=32, high=8192, help="shrink the photo so its long side is at most this, "
+                                                         "in pixels, before anything else.")
+    fov: Optional[float] = option(None, low=MIN_FOV_DEG, high=MAX_FOV_DEG, default_text="from EXIF, else 60",
+                                  help="vertical field of view of the photo in degrees.")
+    relief: float = option(1.0, low=0.25, high=4.0,
+                           help="exaggerate (> 1) or flatten (< 1) the 3D relief: each depth d becomes "
+                                "d ** relief before the scene is normalised, so the nearest surface stays put, "
+                                "the photo's own view is unchanged and farther things move away (or closer); "
+                                "1 keeps the depth as estimated.")
+    ldi: LDISettings = option(default_factory=LDISettings, cli=False,
+                              help="layered-depth-image settings (tearing, hidden layer, border).")
+
+    def __post_init__(self) -> None:
+        check_options(self)
+
+
+@documented
+@dataclass(frozen=True)
+class RenderJob:
+    """Render a 3D photo along a camera path into a video (:func:`run_render`).
+
+    Every value is checked when the job is made; the output paths (extension,
+    folder) are checked by :func:`check_outputs` before anything is computed.
+    """
+
+    spec: PhotoSpec = option(default_factory=PhotoSpec, help="the photo and how it becomes a 3D photo.")
+    output: str = option("out.mp4", flags=("-o", "--output"),
+                         help="the video: .mp4, .gif, or a folder (ending in /) for PNG frames.")
+    trajectory: TrajectoryName = option("circle", help="camera path shape (see geometry/trajectories.py).")
+    frames: int = option(90, low=1, high=10000, help="number of frames (90: 3 s at 30 fps, as the paper's code).")
+    fps: float = option(30.0, low=1.0, high=240.0, help=f"frames per second of the video (a GIF: at most "
+                                                       f"{MAX_GIF_FPS:g}).")
+    size: int = option(512, low=16, high=4096, help="long side of the output frames in pixels (the photo's aspect).")
+    supersample: int = option(1, choices=(1, 2),
+                              help="1 = sharp and fast, 2 = rasterize at twice the size (smoother when the "
+                                   "camera moves away).")
+    camera_path: Optional[str] = option(None, metavar="JSON",
+                                        help="follow the cameras of this camera-path JSON instead of "
+                                             "trajectory/frames.")
+    save_camera_path: Optional[str] = option(None, metavar="JSON", help="also write the cameras used (JSON).")
+    save_ply: Optional[str] = option(None, metavar="FILE", help="also write the coloured point cloud (PLY).")
+    style: Optional[str] = option(None, metavar="IMAGE", default_text="none: the plain 3D photo",
+                                  help="style image (a painting, a texture).")
+    strength: float = option(0.8, low=0.0, high=1.0, help="style strength from 0 (photo) to 1.")
+    model: str = option(DEFAULT_MODEL, metavar="CHECKPOINT", default_text="the shipped lite model",
+                        help="the stylization model checkpoint used with style.")
+
+    def __post_init__(self) -> None:
+        check_options(self)
+        if self.camera_path is None and video_kind(self.output) == "gif" and self.fps > MAX_GIF_FPS:
+            raise InputError("fps", f"a GIF plays at most {MAX_GIF_FPS:g} fps, got {self.fps!r}")
+
+
+def _check_destination(path: str, what: str, suffixes: Tuple[str, ...]) -> None:
+    p = Path(path)
+    if suffixes and p.suffix.lower() not in suffixes:
+        raise InputError(path, f"{what} must end in {' or '.join(suffixes)}")
+    folder = p.parent if str(p.parent) else Path(".")
+    if not folder.is_dir():
+        raise InputError(path, f"folder {folder} does not exist")
+    if p.is_dir():
+        raise InputError(path, f"is a folder; {what} must be a file")
+
+
+def check_outputs(job: RenderJob) -> None:
+    """Check every output path of ``job`` (extension, existing folder, no clashes) before anything is written."""
+    kind = video_kind(job.output)  # InputError naming an unknown extension
+    out = Path(job.output)
+    if kind == "png":
+        parent = out.parent if str(out.parent) else Path(".")
+        if not parent.is_dir():
+            raise InputError(job.output, f"folder {parent} does not exist")
+        if out.exists() and not out.is_dir():
+            raise InputError(job.output, "exists and is not a folder; PNG frames need a folder")
+    else:
+        _check_destination(job.output, "the video", ())
+    if job.save_ply is not None:
+        _check_destination(job.save_ply, "a point cloud file", (".ply",))
+    if job.save_camera_path is not None:
+        _check_destination(job.save_camera_path, "a camera-path file", (".json",))
+    inputs = [p for p in (job.spec.photo, job.camera_path, job.style) if p is not None]
+    outputs = [p for p in (job.output, job.save_ply, job.save_camera_path) if p is not None]
+    seen: Dict[Path, str] = {}
+    for p in outputs:
+        key = Path(p).resolve()
+        if key in seen:
+            raise InputError(p, f"is also the output {seen[key]}; give each output its own path")
+        seen[key] = p
+    for p in inputs:
+        if Path(p).resolve() in seen:
+            raise InputError(p, "is both an input and an output; writing it would destroy the input")
 
 
 class RenderResult(NamedTuple):
@@ -92,26 +160,37 @@ class RenderResult(NamedTuple):
     timings: Dict[str, float]  # seconds per stage
 
 
-def load_photo3d(
-    photo: str, depth: str = "auto", *, max_size: int = 1024, fov: Optional[float] = None,
-    ldi: LDISettings = LDISettings(), refine_depth: Optional[str] = None, log: Log = _quiet,
-) -> Photo3D:
-    """Read ``photo``, get its depth from the source ``depth`` names (edges aligned with the
-    photo's by the ``refine_depth`` method, if given), and build the 3D photo."""
+def _with_relief(depth_map: DepthMap, relief: float) -> DepthMap:
+    """``depth_map`` with every depth raised to ``relief`` (only ratios are kept: the result is relative)."""
+    d = depth_map.depth.astype(np.float64)
+    scaled = np.exp(relief * (np.log(d) - np.log(np.median(d))))  # about 1 at the median: no overflow
+    return DepthMap(scaled.astype(np.float32), depth_map.valid, "relative", f"{depth_map.source}, relief {relief:g}")
+
+
+def load_photo3d(spec: PhotoSpec, *, log: Log = _quiet) -> Photo3D:
+    """Read the photo ``spec`` names, get its depth from the source ``spec.depth`` names (edges
+    aligned with the photo's by ``spec.refine_depth``, if given), and build the 3D photo."""
     from .depth.refine import RefineSettings  # the depth package is heavier (onnxruntime)
     from .depth.sources import parse_depth_spec
 
-    refine = None if refine_depth is None else RefineSettings(method=refine_depth)
+    if not isinstance(spec, PhotoSpec):
+        raise InputError("spec", f"expected a PhotoSpec, got {type(spec).__name__}")
+    if spec.photo is None:
+        raise InputError("photo", "no photo given")
+    photo, depth, max_size, fov = spec.photo, spec.depth, spec.max_size, spec.fov
+    refine = None if spec.refine_depth is None else RefineSettings(method=spec.refine_depth)
     t0 = time.perf_counter()
     image = load_image(photo, max_size=max_size)
     source = parse_depth_spec(depth, refine=refine)
     t1 = time.perf_counter()
     found = source.estimate(image)  # reads phone depth from the bytes load_image kept; no second read
     rgb, depth_map = found.rgb, found.depth_map  # rgb: the left half of a side-by-side stereo card, else the photo
+    if spec.relief != 1.0:
+        depth_map = _with_relief(depth_map, spec.relief)
     t2 = time.perf_counter()
     if fov is None:
         fov = image.fov_y_deg() or DEFAULT_FOV_Y_DEG
-    p3d = Photo3D.build(rgb, depth_map, Photo3DSettings(fov_y_deg=check_fov(fov), ldi=ldi))
+    p3d = Photo3D.build(rgb, depth_map, Photo3DSettings(fov_y_deg=check_fov(fov), ldi=spec.ldi))
     p3d.timings.update({"load": t1 - t0, "depth": t2 - t1})
     h, w = rgb.shape[:2]
     log(
@@ -121,10 +200,11 @@ def load_photo3d(
     return p3d
 
 
-def job_cameras(job: RenderJob, fov_y_deg: float) -> Tuple[Cameras, float]:
-    """The cameras and fps a job renders: its camera-path file, else its trajectory."""
+def job_cameras(job: RenderJob, fov_y_deg: float, loaded: Optional[CameraPath] = None) -> Tuple[Cameras, float]:
+    """The cameras and fps a job renders: its camera path (``loaded``, else read from its file), else its
+    trajectory."""
     if job.camera_path is not None:
-        path = load_camera_path(job.camera_path)
+        path = loaded if loaded is not None else load_camera_path(job.camera_path)
         return path.cameras, float(path.fps or job.fps)
     settings = TrajectorySettings(name=job.trajectory, n_frames=job.frames, fov_y_deg=fov_y_deg)
     return make_trajectory(settings), float(job.fps)
@@ -154,14 +234,18 @@ def _stylized(p3d: Photo3D, job: RenderJob, settings, style, timings: Dict[str, 
 
 
 def run_render(job: RenderJob, *, progress: Optional[Progress] = None, log: Log = _quiet) -> RenderResult:
-    """Run a :class:`RenderJob`: build the 3D photo, render every frame, write the video."""
-    if job.supersample not in (1, 2):
-        raise InputError("supersample", f"must be 1 or 2, got {job.supersample!r}")
+    """Run a :class:`RenderJob`: check its outputs and inputs, build the 3D photo, render every frame,
+    write the video (and the point cloud and camera path it asks for)."""
+    check_outputs(job)
     style_inputs = _check_style_inputs(job) if job.style is not None else None
-    p3d = load_photo3d(job.photo, job.depth, max_size=job.max_size, fov=job.fov, ldi=job.ldi,
-                      refine_depth=job.refine_depth, log=log)
+    loaded_path = load_camera_path(job.camera_path) if job.camera_path is not None else None
+    if loaded_path is not None and loaded_path.fps is not None and video_kind(job.output) == "gif" \
+            and loaded_path.fps > MAX_GIF_FPS:
+        raise InputError(job.camera_path, f"its {loaded_path.fps:g} fps is too fast for a GIF "
+                                          f"(at most {MAX_GIF_FPS:g})")
+    p3d = load_photo3d(job.spec, log=log)
     timings = dict(p3d.timings)
-    cameras, fps = job_cameras(job, p3d.fov_y_deg)
+    cameras, fps = job_cameras(job, p3d.fov_y_deg, loaded_path)
     H, W = frame_size(p3d.size, job.size)
     if job.save_ply is not None:
         pts = p3d.points

@@ -10,7 +10,7 @@ from stylize3d_core.geometry.trajectories import circle
 from stylize3d_core.io.images import load_image
 from stylize3d_core.models.checkpoint import load_checkpoint
 from stylize3d_core.models.losses import style_distance
-from stylize3d_core.pipeline import DEFAULT_MODEL, load_photo3d
+from stylize3d_core.pipeline import DEFAULT_MODEL, PhotoSpec, load_photo3d
 from stylize3d_core.render.plain import PlainRenderer
 from stylize3d_core.stylize import Stylized3DPhoto, StylizeSettings
 
@@ -24,7 +24,7 @@ def _t(img):
 @pytest.fixture(scope="module")
 def scene():
     ck = load_checkpoint(DEFAULT_MODEL)
-    p3d = load_photo3d(str(ROOT / "assets/samples/coffee.jpg"), max_size=256)
+    p3d = load_photo3d(PhotoSpec(str(ROOT / "assets/samples/coffee.jpg"), max_size=256))
     return ck, p3d
 
 

@@ -19,7 +19,7 @@ sys.path.insert(0, str(ROOT))
 
 from stylize3d_core.geometry.trajectories import circle  # noqa: E402
 from stylize3d_core.io.images import load_image, save_image  # noqa: E402
-from stylize3d_core.pipeline import DEFAULT_MODEL, load_photo3d  # noqa: E402
+from stylize3d_core.pipeline import DEFAULT_MODEL, PhotoSpec, load_photo3d  # noqa: E402
 from stylize3d_core.render.plain import PlainRenderer, frame_size  # noqa: E402
 from stylize3d_core.stylize import Stylized3DPhoto, StylizeSettings  # noqa: E402
 
@@ -34,7 +34,7 @@ def main() -> None:
     ap.add_argument("--out", default=str(ROOT / "docs/stylized_sheet.png"))
     args = ap.parse_args()
 
-    p3d = load_photo3d(args.photo)
+    p3d = load_photo3d(PhotoSpec(args.photo))
     H, W = frame_size(p3d.size, args.size)
     cams = circle(90, fov_y_deg=p3d.fov_y_deg)
     picks = (0, 22, 45, 67)

@@ -7,9 +7,14 @@
 
 Modules: :mod:`.orbit` (camera math), :mod:`.state` (view state, scheduling),
 :mod:`.worker` (the compute thread), :mod:`.session` (3D photo, model, renders,
-export), :mod:`.panel` and :mod:`.window` (widgets and callbacks, main thread),
-:mod:`.script` (test hooks). Only the last three import Open3D's GUI, and only
-when the viewer starts, so the rest can be imported and tested headless.
+export), :mod:`.panel`, :mod:`.window` and :mod:`.actions` (widgets, the window
+and its controllers, main thread), :mod:`.script` (test hooks). Only the last
+four import Open3D's GUI, and only when the viewer starts, so the rest can be
+imported and tested headless.
+
+The photo options (the photo, ``--depth``, ``--refine-depth``, ``--max-size``,
+``--fov``, ...) are derived from ``stylize3d_core.pipeline.PhotoSpec``'s fields,
+as ``stylize3d render``'s are; only the viewer's own options are written here.
 """
 
 from __future__ import annotations
@@ -18,9 +23,12 @@ import argparse
 import sys
 from typing import List, Optional
 
-from stylize3d_core.depth.refine import REFINE_METHODS
+from stylize3d_core.errors import InputError
+from stylize3d_core.pipeline import PhotoSpec
 
+from ..options import add_options, from_args
 from .session import DEFAULT_MODEL
+from .state import VIEWER_MAX_SIZE
 
 PROG = "stylize3d-viewer"
 
@@ -30,21 +38,14 @@ def build_parser() -> argparse.ArgumentParser:
         prog=PROG,
         description="Browse a stylized 3D photo: drag to orbit (right/shift-drag pans, wheel moves "
                     "forwards), change the style and its strength, export videos.")
-    p.add_argument("photo", nargs="?", default=None, help="photo to open (JPEG, PNG, WebP, TIFF)")
+    add_options(p, PhotoSpec, defaults={"max_size": VIEWER_MAX_SIZE}, positional={"photo": "?"})
     p.add_argument("--style", default=None, help="style image to apply")
-    p.add_argument("--depth", default="auto", metavar="SPEC",
-                   help="depth source: auto (default), prior, phone, a depth file (append :disparity for "
-                        "disparity), onnx:MODEL.onnx, stereo:RIGHT_IMAGE, stereo:sbs")
-    p.add_argument("--refine-depth", default=None, choices=REFINE_METHODS, metavar="METHOD",
-                   help="align depth edges with the photo's: bilateral_median, joint_bilateral or guided")
     models = p.add_mutually_exclusive_group()
     models.add_argument("--model", default=None, metavar="CHECKPOINT",
                         help=f"model checkpoint (.safetensors); default {DEFAULT_MODEL.relative_to(DEFAULT_MODEL.parents[2])} "
                              "when it exists, else the plain 3D photo is shown")
     models.add_argument("--no-model", action="store_true",
                         help="show the plain 3D photo even if a model is available")
-    p.add_argument("--max-size", type=int, default=640, help="shrink the photo to this long side (default 640)")
-    p.add_argument("--fov", type=float, default=None, help="vertical FOV of the photo in degrees (default: EXIF, else 60)")
     p.add_argument("--strength", type=float, default=0.8, help="style strength in [0, 1] (default 0.8)")
     p.add_argument("--threads", type=int, default=1,
                    help="torch threads of the compute worker (default 1: on a 2-core machine the other core "
@@ -66,6 +67,11 @@ def main(argv: Optional[List[str]] = None) -> int:
     if not 0.0 <= args.strength <= 1.0:
         print(f"{PROG}: --strength must be in [0, 1], got {args.strength}", file=sys.stderr)
         return 2
+    try:
+        spec = from_args(PhotoSpec, args)
+    except InputError as e:
+        print(f"{PROG}: error: {e}", file=sys.stderr)
+        return 2
     if args.threads < 1:
         print(f"{PROG}: --threads must be >= 1, got {args.threads}", file=sys.stderr)
         return 2
@@ -80,10 +86,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     steps = read_script(args.test_script) if args.test_script else None
     app = gui.Application.instance
     app.initialize()
-    viewer = ViewerWindow(ViewerOptions(
-        photo=args.photo, style=args.style, depth=args.depth, refine_depth=args.refine_depth, model=args.model, use_model=not args.no_model,
-        max_size=args.max_size,
-        fov=args.fov, strength=args.strength, width=width, height=height))
+    viewer = ViewerWindow(ViewerOptions(spec=spec, style=args.style, model=args.model, use_model=not args.no_model,
+                                        strength=args.strength, width=width, height=height))
     runner = None
     if steps is not None:
         runner = ScriptRunner(viewer, steps, args.test_report or "viewer-test-report.json")

@@ -1,10 +1,22 @@
-"""What the viewer window does besides showing the view: open photos and styles, camera paths, export.
+"""What the viewer window does besides showing the view, as three controllers it is composed of:
 
-:class:`WindowActions` is a mixin of :class:`~app.viewer.window.ViewerWindow`
-(it holds no state of its own). Its methods run on the GUI main thread; the
-work they start (reading files, building the 3D photo, encoding, exporting)
-runs on the compute worker, whose results come back through ``self._post``
-(``post_to_main_thread``). Errors become dialogs; what was loaded stays loaded.
+* :class:`PhotoController`: open photos and styles, the depth source and its
+  edge alignment, the sample, and encoding the photo for the model;
+* :class:`CameraPathController`: the trajectory, the camera-path preview
+  (:class:`~app.viewer.state.Playback`), loading and saving camera paths;
+* :class:`ExportController`: video export with progress and Cancel, screenshots.
+
+They keep no app state of their own: everything lives in the window's
+:class:`~app.viewer.state.ViewState`, which they replace (the export's cancel
+event is the one exception: a thread handle, not state). They use the window
+through its small public surface: ``state``, ``panel``, ``session``, ``worker``,
+``post``, ``set_status``/``set_busy``, ``show_error``, ``view_changed``,
+``request_render``, ``photo_changed``, ``final_frame`` and ``file_dialog``.
+
+Their methods run on the GUI main thread; the work they start (reading files,
+building the 3D photo, encoding, exporting) runs on the compute worker, whose
+results come back through ``window.post`` (``post_to_main_thread``). Errors
+become dialogs; what was loaded stays loaded.
 """
 
 from __future__ import annotations
@@ -15,7 +27,7 @@ import threading
 import time
 import traceback
 from dataclasses import replace
-from typing import Any, Callable, Optional
+from typing import TYPE_CHECKING, Any, Callable, Optional
 
 import open3d.visualization.gui as gui
 
@@ -27,10 +39,16 @@ from stylize3d_core.render.plain import frame_size
 
 from . import panel as P
 from .orbit import HOME
-from .session import NO_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE, ExportJob, PhotoInfo, StylizeInfo
+from .session import NO_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE, ExportJob, StylizeInfo
 from .state import (
-    LOADED_PATH, ExportSettings, export_destination, fov_range, trajectory_cameras, view_camera,
+    LOADED_PATH, ExportSettings, PhotoInfo, Playback, export_destination, fov_range, playback_frame,
+    shows_stylized, trajectory_cameras, view_camera,
 )
+
+if TYPE_CHECKING:
+    from stylize3d_core.pipeline import PhotoSpec
+
+    from .window import ViewerWindow
 
 IMAGE_FILTERS = ((".jpg .jpeg .png .webp .tif .tiff", "Images (JPEG, PNG, WebP, TIFF)"), ("", "All files"))
 DEPTH_FILTERS = ((".png .npy .pfm .tif .tiff .exr", "Depth (PNG16, NPY, PFM, TIFF, EXR)"), ("", "All files"))
@@ -53,308 +71,346 @@ def ui_callback(fn: Callable) -> Callable:
     return wrapper
 
 
-class WindowActions:
-    """Photo, style, depth, camera-path, export and screenshot actions of the viewer window (a mixin).
+class Controller:
+    """One part of the window's behaviour (see the module docstring). Thread use: GUI main thread only."""
 
-    Thread use: GUI main thread only; the work runs on the compute worker.
-    """
+    def __init__(self, window: "ViewerWindow") -> None:
+        self.window = window
 
-    # -- photo, depth, style, model ------------------------------------------------------
+    def show_error(self, what: str, error: BaseException) -> None:
+        """Show ``error`` in the window's dialog (``ui_callback`` reports through this)."""
+        self.window.show_error(what, error)
+
+    def task_failed(self, name: str, e: BaseException) -> None:
+        """A worker task failed: clear the progress and show the error."""
+        self.window.set_busy(None, None)
+        self.window.show_error(name, e)
+
+    def submit(self, name: str, fn: Callable[[], Any], on_done: Callable[[Any], None], key: Optional[str] = None) -> None:
+        """Run ``fn`` on the worker; ``on_done(result)`` (or the error dialog) follows on the main thread."""
+        w = self.window
+        w.worker.submit(name, fn, on_done=lambda r: w.post(lambda: on_done(r)),
+                        on_error=lambda n, e: w.post(lambda: self.task_failed(n, e)), key=key)
+
+
+class PhotoController(Controller):
+    """Photos, styles, the depth source and its edge alignment, the sample, encoding for the model."""
+
     def open_photo(self, path: str, depth: Optional[str] = None) -> None:
-        """Load a photo on the worker (the current photo stays until the new one is built)."""
-        depth = self.state.depth if depth is None else depth
-        s = self.state
-        self._set_busy(f"Building the 3D photo of {os.path.basename(path)} ...", 0.1)
-        self.worker.submit(
-            "open photo", lambda: self.session.load_photo(path, depth, max_size=s.max_size, fov=s.photo_fov,
-                                                          refine_depth=s.refine_depth),
-            on_done=lambda info: self._post(lambda: self._on_photo_loaded(info, depth)),
-            on_error=lambda name, e: self._post(lambda: self._on_task_failed(name, e)), key="photo")
+        """Build the 3D photo of ``path`` on the worker with the state's photo spec (and ``depth``, if
+        given); the current photo stays until the new one is built."""
+        w = self.window
+        spec = replace(w.state.spec, photo=str(path), depth=w.state.spec.depth if depth is None else depth)
+        self.load(spec)
 
-    def _on_photo_loaded(self, info: PhotoInfo, depth: str) -> None:
-        self.info = info
-        self.state = replace(self.state, photo=info.path, depth=depth, pose=HOME, view_fov=None)
-        self.stylize_available = False
-        p = self.panel
-        h, w = info.size
-        p.photo_label.text = f"{os.path.basename(info.path)}  {w}x{h}, {info.n_points:,} points"
+    def load(self, spec: "PhotoSpec") -> None:
+        """Build the 3D photo ``spec`` describes on the worker; on success it becomes the state's spec."""
+        w = self.window
+        w.set_busy(f"Building the 3D photo of {os.path.basename(str(spec.photo))} ...", 0.1)
+        session = w.session
+        self.submit("open photo", lambda: session.load_photo(spec), lambda info: self._loaded(info, spec), key="photo")
+
+    def _loaded(self, info: PhotoInfo, spec: "PhotoSpec") -> None:
+        w = self.window
+        w.state = replace(w.state, spec=spec, photo_info=info, stylize_available=False, pose=HOME, view_fov=None)
+        p = w.panel
+        h, wd = info.size
+        p.photo_label.text = f"{os.path.basename(info.path)}  {wd}x{h}, {info.n_points:,} points"
         lo, hi = fov_range(info.fov_y_deg)
         p.fov.set_limits(lo, hi)
         p.fov.double_value = info.fov_y_deg
         p.set_enabled(True)
-        self._set_busy(f"3D photo ready in {info.seconds:.1f} s (depth: {info.depth_source})", 0.5)
-        self._display_hw = (0, 0)
-        self._update_display_size()  # requests the first (plain) frame
+        w.set_busy(f"3D photo ready in {info.seconds:.1f} s (depth: {info.depth_source})", 0.5)
+        w.photo_changed()  # requests the first (plain) frame
         p.model_label.text = "encoding the point cloud for the model ..."
-        self.worker.submit("encode photo", self.session.prepare_stylized,
-                           on_done=lambda r: self._post(lambda: self._on_stylize_ready(r)),
-                           on_error=lambda name, e: self._post(lambda: self._on_stylize_failed(name, e)))
+        w.worker.submit("encode photo", w.session.prepare_stylized,
+                        on_done=lambda r: w.post(lambda: self._stylize_ready(r)),
+                        on_error=lambda name, e: w.post(lambda: self._stylize_failed(name, e)))
 
-    def _on_stylize_ready(self, r: StylizeInfo) -> None:
-        self.stylize_available = r.available
-        self.panel.model_label.text = r.message
-        self.panel.stylized.enabled = r.available
-        self._set_busy(f"Ready (point cloud encoded in {r.seconds:.1f} s)" if r.available else "Ready", None)
-        self._view_changed()
+    def _set_stylize_available(self, available: bool, message: str) -> None:
+        w = self.window
+        w.state = replace(w.state, stylize_available=available)
+        w.panel.model_label.text = message
+        w.panel.stylized.enabled = available
 
-    def _on_stylize_failed(self, name: str, e: BaseException) -> None:
-        self.stylize_available = False
-        self.panel.model_label.text = NO_MODEL
-        self.panel.stylized.enabled = False
-        self._set_busy(None, None)
-        self.show_error(name, e)
+    def _stylize_ready(self, r: StylizeInfo) -> None:
+        self._set_stylize_available(r.available, r.message)
+        self.window.set_busy(f"Ready (point cloud encoded in {r.seconds:.1f} s)" if r.available else "Ready", None)
+        self.window.view_changed()
 
-    def _on_task_failed(self, name: str, e: BaseException) -> None:
-        self._set_busy(None, None)
-        self.show_error(name, e)
+    def _stylize_failed(self, name: str, e: BaseException) -> None:
+        self._set_stylize_available(False, NO_MODEL)
+        self.task_failed(name, e)
 
     def open_style(self, path: str) -> None:
         """Read a style image on the worker and apply it (the encoded point cloud is re-used)."""
-        self._set_busy(f"Applying style {os.path.basename(path)} ...", 0.3)
-        self.worker.submit("open style", lambda: self.session.load_style(path),
-                           on_done=lambda hw: self._post(lambda: self._on_style_loaded(path)),
-                           on_error=lambda name, e: self._post(lambda: self._on_task_failed(name, e)), key="style")
+        w = self.window
+        w.set_busy(f"Applying style {os.path.basename(path)} ...", 0.3)
+        session = w.session
+        self.submit("open style", lambda: session.load_style(path), lambda _hw: self._style_loaded(path), key="style")
 
-    def _on_style_loaded(self, path: str) -> None:
-        self.state = replace(self.state, style=path)
-        self.panel.style_label.text = os.path.basename(path)
-        self._set_busy("Style applied" if self.stylize_available else f"Style chosen ({NO_MODEL})", None)
-        self._view_changed()
-
-    @ui_callback
-    def _on_open_photo(self) -> None:
-        self._file_dialog(gui.FileDialog.OPEN, "Open photo", IMAGE_FILTERS, self.open_photo)
-
-    @ui_callback
-    def _on_open_style(self) -> None:
-        self._file_dialog(gui.FileDialog.OPEN, "Open style image", IMAGE_FILTERS, self.open_style)
-
-    @ui_callback
-    def _on_sample(self) -> None:
-        self.load_sample()
+    def _style_loaded(self, path: str) -> None:
+        w = self.window
+        w.state = replace(w.state, style=path)
+        w.panel.style_label.text = os.path.basename(path)
+        w.set_busy("Style applied" if w.state.stylize_available else f"Style chosen ({NO_MODEL})", None)
+        w.view_changed()
 
     def load_sample(self) -> None:
         """Open the bundled sample photo and style."""
         self.open_style(str(SAMPLE_STYLE))
         self.open_photo(str(SAMPLE_PHOTO))
 
-    @ui_callback
-    def _on_depth_choice(self, text: str, index: int) -> None:
-        self._set_depth(P.DEPTH_CHOICES[index][0])
-
-    @ui_callback
-    def _on_open_depth(self) -> None:
-        self._file_dialog(gui.FileDialog.OPEN, "Open depth or disparity file", DEPTH_FILTERS, self._set_depth)
-
-    @ui_callback
-    def _on_refine_choice(self, text: str, index: int) -> None:
-        self.set_refine_depth(P.REFINE_CHOICES[index][0])
+    def change_spec(self, status: str, **changes: Any) -> None:
+        """Change options of the photo spec (e.g. ``depth="prior"``) and rebuild the open photo with them;
+        with no photo open, keep them for the next one and show ``status``."""
+        w = self.window
+        spec = replace(w.state.spec, **changes)  # InputError for a bad value: nothing changes
+        if spec.photo is None:
+            w.state = replace(w.state, spec=spec)
+            w.set_status(status)
+        else:
+            self.load(spec)
 
     def set_refine_depth(self, method: Optional[str]) -> None:
         """Choose the depth-edge alignment (None: none) and rebuild the open photo with it."""
-        self.state = replace(self.state, refine_depth=method)
-        if self.state.photo is None:
-            self._set_status(f"Depth edges: {method or 'as estimated'}")
-        else:
-            self.open_photo(self.state.photo)
+        self.change_spec(f"Depth edges: {method or 'as estimated'}", refine_depth=method)
 
-    def _set_depth(self, spec: str) -> None:
-        if self.state.photo is None:
-            self.state = replace(self.state, depth=spec)
-            self._set_status(f"Depth source: {spec}")
-        else:
-            self.open_photo(self.state.photo, depth=spec)
+    def set_depth(self, source: str) -> None:
+        """Choose the depth source (a spec such as "prior" or a depth file) and rebuild the open photo with it."""
+        self.change_spec(f"Depth source: {source}", depth=source)
 
-    def _file_dialog(self, mode, title: str, filters, on_done: Callable[[str], None]) -> None:
-        dlg = gui.FileDialog(mode, title, self.window.theme)
-        for ext, desc in filters:
-            dlg.add_filter(ext, desc)
-
-        def done(path: str) -> None:
-            self.window.close_dialog()
-            try:
-                on_done(path)
-            except Exception as e:  # reported to the user; the session stays usable
-                self.show_error(title, e)
-
-        dlg.set_on_cancel(self.window.close_dialog)
-        dlg.set_on_done(done)
-        self.window.show_dialog(dlg)
-
-    # -- camera path: trajectory, preview, load / save -----------------------------------------
+    # -- widget callbacks --------------------------------------------------------------
     @ui_callback
-    def _on_trajectory(self, text: str, index: int) -> None:
-        if text == LOADED_PATH:
-            self.state = replace(self.state, use_loaded_path=True)
-        else:
-            self.state = replace(self.state, use_loaded_path=False, trajectory=replace(self.state.trajectory, name=text))
+    def on_open_photo(self) -> None:
+        self.window.file_dialog(gui.FileDialog.OPEN, "Open photo", IMAGE_FILTERS, self.open_photo)
 
     @ui_callback
-    def _on_trajectory_params(self, _value: float) -> None:
-        p = self.panel
-        t = replace(self.state.trajectory, x=float(p.amp_x.double_value), y=float(p.amp_y.double_value),
-                    z=(0.0, float(p.forward.double_value)))
-        self.state = replace(self.state, trajectory=t)
+    def on_open_style(self) -> None:
+        self.window.file_dialog(gui.FileDialog.OPEN, "Open style image", IMAGE_FILTERS, self.open_style)
+
+    @ui_callback
+    def on_sample(self) -> None:
+        self.load_sample()
+
+    @ui_callback
+    def on_depth_choice(self, text: str, index: int) -> None:
+        self.set_depth(P.DEPTH_CHOICES[index][0])
+
+    @ui_callback
+    def on_open_depth(self) -> None:
+        self.window.file_dialog(gui.FileDialog.OPEN, "Open depth or disparity file", DEPTH_FILTERS, self.set_depth)
+
+    @ui_callback
+    def on_refine_choice(self, text: str, index: int) -> None:
+        self.set_refine_depth(P.REFINE_CHOICES[index][0])
+
+
+class CameraPathController(Controller):
+    """The trajectory, the camera-path preview in the view, loading and saving camera-path JSON."""
 
     def export_cameras(self):
         """The cameras the export (and the path preview) uses."""
-        if self.info is None:
+        s = self.window.state
+        if s.photo_info is None:
             raise InputError("photo", "open a photo first")
-        loaded = self.loaded_path.cameras if self.loaded_path is not None else None
-        return trajectory_cameras(self.state, self.info.scene, self.info.fov_y_deg, loaded)
+        loaded = s.loaded_path.cameras if s.loaded_path is not None else None
+        return trajectory_cameras(s, s.photo_info.scene, s.photo_info.fov_y_deg, loaded)
 
     @ui_callback
-    def _on_preview_path(self) -> None:
-        if self.info is None:
-            return
-        if self._playback is not None:
-            self._stop_playback()
-            return
-        self._playback = {"cameras": self.export_cameras(), "start": time.monotonic(), "fps": self.state.export.fps,
-                          "index": -1}
-        self.panel.preview_path.text = "Stop preview (C)"
-
-    def _step_playback(self, now: float) -> None:
-        pb = self._playback
-        i = int((now - pb["start"]) * pb["fps"])
-        if i >= len(pb["cameras"]):
-            self._stop_playback()
-            return
-        if i != pb["index"]:
-            pb["index"] = i
-            self._request_render(preview=True, camera=pb["cameras"][i])
-
-    def _stop_playback(self) -> None:
-        if self._playback is not None:
-            self._playback = None
-            self.panel.preview_path.text = "Preview (C)"
-            self._view_changed()
+    def on_trajectory(self, text: str, index: int) -> None:
+        w = self.window
+        if text == LOADED_PATH:
+            w.state = replace(w.state, use_loaded_path=True)
+        else:
+            w.state = replace(w.state, use_loaded_path=False, trajectory=replace(w.state.trajectory, name=text))
 
     @ui_callback
-    def _on_load_path(self) -> None:
-        self._file_dialog(gui.FileDialog.OPEN, "Load camera path", JSON_FILTERS, self.load_camera_path)
+    def on_trajectory_params(self, _value: float) -> None:
+        w = self.window
+        p = w.panel
+        t = replace(w.state.trajectory, x=float(p.amp_x.double_value), y=float(p.amp_y.double_value),
+                    z=(0.0, float(p.forward.double_value)))
+        w.state = replace(w.state, trajectory=t)
+
+    # -- preview in the view ------------------------------------------------------------
+    @property
+    def playing(self) -> bool:
+        return self.window.state.playback is not None
+
+    @ui_callback
+    def toggle_preview(self) -> None:
+        """Play the export's camera path in the view (the Preview button), or stop it."""
+        w = self.window
+        if w.state.photo_info is None:
+            return
+        if self.playing:
+            self.stop()
+            return
+        pb = Playback(self.export_cameras(), time.monotonic(), w.state.export.fps)
+        w.state = replace(w.state, playback=pb)
+        w.panel.preview_path.text = "Stop preview (C)"
+
+    def step(self, now: float) -> None:
+        """Tick: request the preview's camera for ``now``; stop at its end."""
+        w = self.window
+        pb = w.state.playback
+        if pb is None:
+            return
+        i = playback_frame(pb, now)
+        if i is None:
+            self.stop()
+        elif i != pb.index:
+            w.state = replace(w.state, playback=replace(pb, index=i))
+            w.request_render(preview=True, camera=pb.cameras[i])
+
+    def stop(self) -> None:
+        """Stop the preview (if playing) and go back to the user's view."""
+        w = self.window
+        if w.state.playback is not None:
+            w.state = replace(w.state, playback=None)
+            w.panel.preview_path.text = "Preview (C)"
+            w.view_changed()
+
+    # -- files --------------------------------------------------------------------------
+    @ui_callback
+    def on_load_path(self) -> None:
+        self.window.file_dialog(gui.FileDialog.OPEN, "Load camera path", JSON_FILTERS, self.load_camera_path)
 
     def load_camera_path(self, path: str) -> None:
         """Read a camera-path JSON on the worker and use it for the preview and export."""
-        self.worker.submit("load camera path", lambda: load_camera_path(path),
-                           on_done=lambda cp: self._post(lambda: self._on_path_loaded(path, cp)),
-                           on_error=lambda name, e: self._post(lambda: self._on_task_failed(name, e)))
+        self.submit("load camera path", lambda: load_camera_path(path), lambda cp: self._path_loaded(path, cp))
 
-    def _on_path_loaded(self, path: str, cp: CameraPath) -> None:
-        self.loaded_path = cp
-        p = self.panel
+    def _path_loaded(self, path: str, cp: CameraPath) -> None:
+        w = self.window
+        p = w.panel
         if p.trajectory.number_of_items == len(p.trajectory_names):
             p.trajectory.add_item(LOADED_PATH)
         p.trajectory.selected_index = len(p.trajectory_names)
-        fps = float(cp.fps) if cp.fps is not None else self.state.export.fps
-        self.state = replace(self.state, use_loaded_path=True, export=replace(self.state.export, fps=min(fps, 240.0)))
-        p.fps.double_value = self.state.export.fps
-        self._set_status(f"Camera path {os.path.basename(path)}: {len(cp.cameras)} frames")
+        fps = float(cp.fps) if cp.fps is not None else w.state.export.fps
+        w.state = replace(w.state, loaded_path=cp, use_loaded_path=True,
+                          export=replace(w.state.export, fps=min(fps, 240.0)))
+        p.fps.double_value = w.state.export.fps
+        w.set_status(f"Camera path {os.path.basename(path)}: {len(cp.cameras)} frames")
 
     @ui_callback
-    def _on_save_path(self) -> None:
-        self._file_dialog(gui.FileDialog.SAVE, "Save camera path", JSON_FILTERS, self.save_camera_path)
+    def on_save_path(self) -> None:
+        self.window.file_dialog(gui.FileDialog.SAVE, "Save camera path", JSON_FILTERS, self.save_camera_path)
 
     def save_camera_path(self, path: str) -> None:
         """Write the export's cameras as camera-path JSON (on the worker)."""
+        s = self.window.state
         cams = self.export_cameras()
-        fps, size = self.state.export.fps, frame_size(self.info.size, self.state.export.size)
-        self.worker.submit("save camera path", lambda: save_camera_path(path, cams, fps=fps, image_size=size),
-                           on_done=lambda out: self._post(lambda: self._set_status(f"Saved {out}")),
-                           on_error=lambda name, e: self._post(lambda: self._on_task_failed(name, e)))
+        fps, size = s.export.fps, frame_size(s.photo_info.size, s.export.size)
+        self.submit("save camera path", lambda: save_camera_path(path, cams, fps=fps, image_size=size),
+                    lambda out: self.window.set_status(f"Saved {out}"))
 
-    # -- export, screenshot ---------------------------------------------------------------
+
+class ExportController(Controller):
+    """Video export (progress, Cancel) and screenshots."""
+
+    def __init__(self, window: "ViewerWindow", paths: CameraPathController) -> None:
+        super().__init__(window)
+        self.paths = paths
+        self._cancel: Optional[threading.Event] = None  # set while an export runs
+
+    @property
+    def exporting(self) -> bool:
+        return self._cancel is not None
+
     @ui_callback
-    def _on_export_params(self, *_args: Any) -> None:
-        p = self.panel
+    def on_export_params(self, *_args: Any) -> None:
+        w = self.window
+        p = w.panel
         fmt = P.EXPORT_FORMATS[max(0, p.format.selected_index)][0]
         try:
             e = ExportSettings(format=fmt, size=int(p.size.int_value), frames=int(p.frames.int_value),
                                fps=float(p.fps.double_value))
         except InputError as err:
-            self.show_error("export settings", err)
+            w.show_error("export settings", err)
             return
-        self.state = replace(self.state, export=e)
+        w.state = replace(w.state, export=e)
 
     @ui_callback
-    def _on_export(self) -> None:
-        if self.info is None or self._export_cancel is not None:
+    def on_export(self) -> None:
+        w = self.window
+        if w.state.photo_info is None or self.exporting:
             return
-        fmt = self.state.export.format
-        self._file_dialog(gui.FileDialog.SAVE, f"Export ({fmt.upper()})", (), self.start_export)
+        fmt = w.state.export.format
+        w.file_dialog(gui.FileDialog.SAVE, f"Export ({fmt.upper()})", (), self.start_export)
 
     def start_export(self, path: str) -> str:
         """Export the camera path to ``path`` on the worker, with progress and Cancel; returns the destination."""
-        if self.info is None:
+        w = self.window
+        s = w.state
+        if s.photo_info is None:
             raise InputError("photo", "open a photo first")
-        if self._export_cancel is not None:
+        if self.exporting:
             raise InputError("export", "an export is already running")
-        e = self.state.export
+        e = s.export
         dest = export_destination(path, e.format)
-        job = ExportJob(dest, self.export_cameras(), frame_size(self.info.size, e.size), e.fps,
-                        self.state.stylized and self.stylize_available)
-        cancel = self._export_cancel = threading.Event()
+        job = ExportJob(dest, self.paths.export_cameras(), frame_size(s.photo_info.size, e.size), e.fps,
+                        shows_stylized(s))
+        cancel = self._cancel = threading.Event()
 
         def progress(done: int, total: Optional[int]) -> None:
             if cancel.is_set():
                 raise ExportCancelled(f"{dest}: export cancelled")
-            self._post(lambda: self._set_busy(f"Exporting {done}/{total} frames ...", done / max(1, total or 1)))
+            w.post(lambda: w.set_busy(f"Exporting {done}/{total} frames ...", done / max(1, total or 1)))
 
-        self.panel.cancel.enabled = True
-        self.panel.export.enabled = False
-        self._set_busy(f"Exporting {len(job.cameras)} frames to {dest} ...", 0.0)
-        self.worker.submit("export", lambda: self.session.export(job, progress, self.worker.serve_pending_render),
-                           on_done=lambda out: self._post(lambda: self._on_export_done(str(out), None)),
-                           on_error=lambda name, err: self._post(lambda: self._on_export_done(dest, err)))
+        w.panel.cancel.enabled = True
+        w.panel.export.enabled = False
+        w.set_busy(f"Exporting {len(job.cameras)} frames to {dest} ...", 0.0)
+        session, worker = w.session, w.worker
+        worker.submit("export", lambda: session.export(job, progress, worker.serve_pending_render),
+                      on_done=lambda out: w.post(lambda: self._done(str(out), None)),
+                      on_error=lambda name, err: w.post(lambda: self._done(dest, err)))
         return dest
 
-    def _on_export_done(self, dest: str, error: Optional[BaseException]) -> None:
-        self._export_cancel = None
-        self.panel.cancel.enabled = False
-        self.panel.export.enabled = True
+    def _done(self, dest: str, error: Optional[BaseException]) -> None:
+        w = self.window
+        self._cancel = None
+        w.panel.cancel.enabled = False
+        w.panel.export.enabled = True
         if error is None:
-            self.stats["last_export"] = dest
-            self._set_busy(f"Exported {dest}", 1.0)
+            w.stats["last_export"] = dest
+            w.set_busy(f"Exported {dest}", 1.0)
         elif isinstance(error, ExportCancelled):
-            self._set_busy("Export cancelled; nothing was written", None)
+            w.set_busy("Export cancelled; nothing was written", None)
         else:
-            self._set_busy(None, None)
-            self.show_error("export", error)
+            w.set_busy(None, None)
+            w.show_error("export", error)
 
-    @property
-    def exporting(self) -> bool:
-        return self._export_cancel is not None
-
-    @ui_callback
-    def _on_cancel(self) -> None:
-        if self._export_cancel is not None:
-            self._export_cancel.set()
-            self._set_status("Cancelling the export ...")
+    def cancel(self) -> None:
+        """Cancel the running export (nothing is written); the window is closing or the user asked."""
+        if self._cancel is not None:
+            self._cancel.set()
 
     @ui_callback
-    def _on_escape(self) -> None:
-        if self.panel.help.visible:
-            self._on_help()
-        else:
-            self._on_cancel()
+    def on_cancel(self) -> None:
+        if self.exporting:
+            self.cancel()
+            self.window.set_status("Cancelling the export ...")
 
     @ui_callback
-    def _on_screenshot(self) -> None:
-        if self.info is None:
+    def on_screenshot(self) -> None:
+        if self.window.state.photo_info is None:
             return
-        self._file_dialog(gui.FileDialog.SAVE, "Save screenshot (PNG)", ((".png", "PNG"),), self.save_screenshot)
+        self.window.file_dialog(gui.FileDialog.SAVE, "Save screenshot (PNG)", ((".png", "PNG"),), self.save_screenshot)
 
     def save_screenshot(self, path: str) -> None:
         """Save the view at full resolution: the frame on screen once it is final, else a fresh render."""
-        if self.info is None:
+        w = self.window
+        s = w.state
+        if s.photo_info is None:
             raise InputError("photo", "open a photo first")
         path = path if path.lower().endswith((".png", ".jpg", ".jpeg", ".webp")) else path + ".png"
-        if self.scheduler.settled and self._shown is not None and not self._shown.preview:
-            image = self._shown.image
+        final = w.final_frame()
+        if final is not None:
+            image = final.image
             job = lambda: save_image(path, image)  # noqa: E731
         else:
-            cam = view_camera(self.state, self.info.scene, self.info.fov_y_deg)
-            size, stylized, session = self._display_hw, self.state.stylized and self.stylize_available, self.session
+            cam = view_camera(s, s.photo_info.scene, s.photo_info.fov_y_deg)
+            size, stylized, session = w.display_hw, shows_stylized(s), w.session
             job = lambda: save_image(path, session.render(cam, size[0], size[1], preview=False, stylized=stylized))  # noqa: E731
-        self.worker.submit("screenshot", job, on_done=lambda _: self._post(lambda: self._set_status(f"Saved {path}")),
-                           on_error=lambda name, e: self._post(lambda: self._on_task_failed(name, e)))
+        self.submit("screenshot", job, lambda _: w.set_status(f"Saved {path}"))

@@ -42,7 +42,7 @@ from typing import Any, Callable, Dict, List, Optional
 from stylize3d_core.errors import InputError
 
 from . import panel as P
-from .state import ExportSettings
+from .state import ExportSettings, shows_stylized, user_choices
 from .window import ViewerWindow
 
 
@@ -134,13 +134,13 @@ class ScriptRunner:
 
     # -- ops ------------------------------------------------------------------------------
     def op_open_photo(self, path: str, depth: str = None) -> None:
-        self.main(lambda: self.window.open_photo(path, depth))
+        self.main(lambda: self.window.photos.open_photo(path, depth))
 
     def op_open_style(self, path: str) -> None:
-        self.main(lambda: self.window.open_style(path))
+        self.main(lambda: self.window.photos.open_style(path))
 
     def op_load_sample(self) -> None:
-        self.main(self.window.load_sample)
+        self.main(self.window.photos.load_sample)
 
     def op_sleep(self, seconds: float) -> None:
         time.sleep(float(seconds))
@@ -203,7 +203,7 @@ class ScriptRunner:
 
         def pick() -> None:
             self.window.panel.refine.selected_index = index
-            self.window._on_refine_choice(P.REFINE_CHOICES[index][1], index)
+            self.window.photos.on_refine_choice(P.REFINE_CHOICES[index][1], index)
 
         self.main(pick)
 
@@ -217,10 +217,10 @@ class ScriptRunner:
         return self.main(apply)
 
     def op_export(self, path: str, wait: bool = True, timeout: float = 300.0) -> Dict[str, Any]:
-        dest = self.main(lambda: self.window.start_export(path))
+        dest = self.main(lambda: self.window.exports.start_export(path))
         if wait:
             t_end = time.monotonic() + float(timeout)
-            while self.window.exporting:
+            while self.window.exports.exporting:
                 if time.monotonic() > t_end:
                     raise TimeoutError(f"the export did not finish within {timeout:g} s")
                 time.sleep(0.1)
@@ -230,9 +230,9 @@ class ScriptRunner:
         """Play the camera path in the view (as the Preview button does) and wait for its end."""
         w = self.window
         n0 = self.main(lambda: len(w.stats["preview_shown"]))
-        self.main(w._on_preview_path)
+        self.main(w.paths.toggle_preview)
         t_end = time.monotonic() + float(timeout)
-        while w._playback is not None:
+        while w.paths.playing:
             if time.monotonic() > t_end:
                 raise TimeoutError(f"the camera-path preview did not end within {timeout:g} s")
             time.sleep(0.05)
@@ -241,7 +241,7 @@ class ScriptRunner:
     def op_wait_export(self, timeout: float = 300.0) -> Dict[str, Any]:
         """Wait until the running export (if any) ends."""
         t_end = time.monotonic() + float(timeout)
-        while self.window.exporting:
+        while self.window.exports.exporting:
             if time.monotonic() > t_end:
                 raise TimeoutError(f"the export did not finish within {timeout:g} s")
             time.sleep(0.1)
@@ -260,10 +260,10 @@ class ScriptRunner:
                 "worker_busy": busy}
 
     def op_cancel_export(self) -> None:
-        self.main(self.window._on_cancel)
+        self.main(self.window.exports.on_cancel)
 
     def op_screenshot(self, path: str, timeout: float = 60.0) -> str:
-        self.main(lambda: self.window.save_screenshot(path))
+        self.main(lambda: self.window.exports.save_screenshot(path))
         t_end = time.monotonic() + float(timeout)
         while not (self.window.worker.is_idle() and os.path.exists(path)):
             if time.monotonic() > t_end:
@@ -284,11 +284,11 @@ class ScriptRunner:
         return {"path": path, "box": list(box)}
 
     def op_save_camera_path(self, path: str) -> None:
-        self.main(lambda: self.window.save_camera_path(path))
+        self.main(lambda: self.window.paths.save_camera_path(path))
         self.op_wait_worker()
 
     def op_load_camera_path(self, path: str) -> None:
-        self.main(lambda: self.window.load_camera_path(path))
+        self.main(lambda: self.window.paths.load_camera_path(path))
         self.op_wait_worker()
 
     def op_wait_worker(self, timeout: float = 60.0) -> None:
@@ -318,4 +318,14 @@ class ScriptRunner:
         raise AssertionError(f"no error dialog containing {contains!r}; errors so far: {self.window.errors}")
 
     def op_state(self) -> Dict[str, Any]:
-        return self.main(lambda: json.loads(json.dumps(asdict(self.window.state), default=str)))
+        """The user's choices in the view state (what was loaded or is playing is left out), and whether
+        a photo is open."""
+
+        def state() -> Dict[str, Any]:
+            s = self.window.state
+            doc = json.loads(json.dumps(asdict(user_choices(s)), default=str))
+            for name in ("photo_info", "loaded_path", "playback"):
+                del doc[name]
+            return {**doc, "photo_loaded": s.photo_info is not None, "stylized_shown": shows_stylized(s)}
+
+        return self.main(state)

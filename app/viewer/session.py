@@ -32,11 +32,12 @@ from stylize3d_core.errors import InputError
 from stylize3d_core.geometry.camera import Cameras
 from stylize3d_core.io.images import load_image, to_uint8
 from stylize3d_core.io.video import Progress, write_video
-from stylize3d_core.pipeline import load_photo3d
+from stylize3d_core.pipeline import PhotoSpec, load_photo3d
 from stylize3d_core.render.plain import PlainRenderer, PlainRenderSettings
 from stylize3d_core.scene.photo3d import Photo3D
 
 from .orbit import OrbitScene
+from .state import PhotoInfo
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_MODEL = REPO_ROOT / "assets" / "model" / "stylize3d_lite.safetensors"
@@ -46,18 +47,6 @@ SAMPLE_STYLE = REPO_ROOT / "assets" / "styles" / "painting_style19_chelsea.jpg"
 NO_MODEL = "no trained model: showing the plain 3D photo"
 STYLE_MAX_SIZE = 512
 """Style images are read with their long side shrunk to this (the style encoder's own cap)."""
-
-
-class PhotoInfo(NamedTuple):
-    """What :meth:`ViewerSession.load_photo` built."""
-
-    path: str
-    size: Tuple[int, int]  # (H, W) of the photo
-    n_points: int
-    fov_y_deg: float
-    depth_source: str
-    scene: OrbitScene
-    seconds: float
 
 
 class StylizeInfo(NamedTuple):
@@ -151,18 +140,16 @@ class ViewerSession:
         return self._stylized is not None
 
     # -- photo --------------------------------------------------------------------
-    def load_photo(self, path: str, depth: str = "auto", *, max_size: int = 640, fov: Optional[float] = None,
-                   refine_depth: Optional[str] = None) -> PhotoInfo:
-        """Build the 3D photo of ``path`` (depth edges aligned by ``refine_depth``, if given);
-        on any error the current photo stays loaded."""
+    def load_photo(self, spec: PhotoSpec) -> PhotoInfo:
+        """Build the 3D photo ``spec`` describes; on any error the current photo stays loaded."""
         t0 = time.perf_counter()
-        photo = load_photo3d(str(path), depth, max_size=max_size, fov=fov, refine_depth=refine_depth)
+        photo = load_photo3d(spec)
         ldi = photo.ldi
         scene = OrbitScene.from_depths(ldi.depth[ldi.photo_region])
         plain = PlainRenderer(photo.points, self.plain_settings)
         # Nothing failed: replace the old photo (and drop its encoding).
         self.photo, self._plain, self._stylized = photo, plain, None
-        self.info = PhotoInfo(str(path), tuple(photo.size), plain.num_points, float(photo.fov_y_deg),
+        self.info = PhotoInfo(str(spec.photo), tuple(photo.size), plain.num_points, float(photo.fov_y_deg),
                               photo.depth.source, scene, time.perf_counter() - t0)
         return self.info
 

@@ -1,9 +1,13 @@
 """The viewer's state and scheduling rules: plain data and pure functions, no widgets, no threads.
 
-:class:`ViewState` is an immutable snapshot of everything the user chose (photo,
-style, strength, camera pose, trajectory, export settings); the window replaces
-it with :func:`dataclasses.replace` on every change and hands snapshots to the
-compute worker, so no state is shared between threads.
+:class:`ViewState` is an immutable snapshot of the whole app state: everything
+the user chose (the photo's :class:`~stylize3d_core.pipeline.PhotoSpec`, style,
+strength, camera pose, trajectory, export settings), what was loaded (the 3D
+photo's :class:`PhotoInfo`, whether the model is ready, a camera path) and the
+camera-path :class:`Playback`; the window replaces it with
+:func:`dataclasses.replace` on every change and hands snapshots to the compute
+worker, so no state is shared between threads. :func:`shows_stylized` is the
+one rule for whether the view goes through the model.
 
 :class:`FrameScheduler` decides when a frame is needed: a low-resolution preview
 at once after every change, the full-resolution frame once the view has rested
@@ -16,14 +20,15 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Literal, Optional, Tuple, get_args
+from typing import Literal, NamedTuple, Optional, Tuple, get_args
 
 from stylize3d_core.checks import check_choice, check_range
-from stylize3d_core.depth.refine import REFINE_METHODS
 from stylize3d_core.errors import InputError
 from stylize3d_core.geometry.camera import Cameras, check_fov
+from stylize3d_core.io.camera_path import CameraPath
 from stylize3d_core.geometry.trajectories import TrajectoryName, TrajectorySettings, make_trajectory
 from stylize3d_core.io.video import MAX_GIF_FPS
+from stylize3d_core.pipeline import PhotoSpec
 from stylize3d_core.render.plain import frame_size
 
 from .orbit import HOME, OrbitLimits, OrbitPose, OrbitScene, clamp_pose, pose_camera, relative_to
@@ -32,6 +37,8 @@ ExportFormat = Literal["mp4", "gif", "png"]
 EXPORT_SUFFIX = {"mp4": ".mp4", "gif": ".gif", "png": ""}
 """File suffix per export format ("png" writes a folder of frames)."""
 
+VIEWER_MAX_SIZE = 640
+"""The viewer's default long side of the photo (smaller than the command line's, for interactive speed)."""
 LOADED_PATH = "camera path file"
 """Trajectory-picker entry for a camera path loaded from JSON."""
 
@@ -92,19 +99,55 @@ class PreviewSettings:
         check_range(self.rest_delay_s, "rest_delay_s", 0.0, 10.0)
 
 
+class PhotoInfo(NamedTuple):
+    """What :meth:`~app.viewer.session.ViewerSession.load_photo` built (the open 3D photo)."""
+
+    path: str
+    size: Tuple[int, int]  # (H, W) of the photo
+    n_points: int
+    fov_y_deg: float
+    depth_source: str
+    scene: OrbitScene
+    seconds: float
+
+
 @dataclass(frozen=True)
-class ViewState:
-    """Everything the user chose; an immutable snapshot (replace it, never mutate it).
+class Playback:
+    """The camera-path preview playing in the view.
 
     Attributes:
-        photo: path of the photo, or None before one is opened.
+        cameras: the cameras it plays, one per frame.
+        start: ``time.monotonic()`` when it started.
+        fps: frames per second.
+        index: the camera last requested (-1: none yet).
+    """
+
+    cameras: Cameras
+    start: float
+    fps: float
+    index: int = -1
+
+    def __post_init__(self) -> None:
+        check_range(self.fps, "playback fps", 1e-3, 1000.0)
+
+
+def playback_frame(playback: Playback, now: float) -> Optional[int]:
+    """The camera the preview shows at ``now``, or None once it has played to the end."""
+    i = max(0, int((now - playback.start) * playback.fps))
+    return i if i < len(playback.cameras) else None
+
+
+@dataclass(frozen=True)
+class ViewState:
+    """The viewer's whole state; an immutable snapshot (replace it, never mutate it).
+
+    What the user chose:
+
+    Attributes:
+        spec: the photo and how it becomes a 3D photo (``stylize3d_core.pipeline.PhotoSpec``);
+            ``spec.photo`` is the open photo (None before one is built). Default max size 640.
         style: path of the style image, or None.
-        depth: depth source spec (see ``stylize3d_core.depth.sources``). Default "auto".
-        refine_depth: align the depth's edges with the photo's first: None (default),
-            "bilateral_median", "joint_bilateral" or "guided" (``stylize3d_core.depth.refine``).
         model: checkpoint path, or None for the default ``assets/model/stylize3d_lite.safetensors``.
-        max_size: long side the photo is shrunk to before building the 3D photo. Default 640.
-        photo_fov: vertical FOV of the photo in degrees; None = from EXIF, else 60.
         strength: style strength in [0, 1]. Default 0.8.
         stylized: show the stylized view (True, default) or the original 3D photo.
         view_fov: vertical FOV of the view in degrees; None = the photo's FOV.
@@ -112,15 +155,19 @@ class ViewState:
         trajectory: the camera-path shape and its parameters (frames come from ``export``).
         use_loaded_path: follow the camera path loaded from JSON instead of ``trajectory``.
         export: export settings.
+
+    What was loaded and what is playing:
+
+    Attributes:
+        photo_info: the open 3D photo (size, FOV, scene depths), or None.
+        stylize_available: the open photo is encoded for the model (see :func:`shows_stylized`).
+        loaded_path: the camera path loaded from JSON, or None.
+        playback: the camera-path preview playing in the view, or None.
     """
 
-    photo: Optional[str] = None
+    spec: PhotoSpec = PhotoSpec(max_size=VIEWER_MAX_SIZE)
     style: Optional[str] = None
-    depth: str = "auto"
-    refine_depth: Optional[str] = None
     model: Optional[str] = None
-    max_size: int = 640
-    photo_fov: Optional[float] = None
     strength: float = 0.8
     stylized: bool = True
     view_fov: Optional[float] = None
@@ -128,17 +175,29 @@ class ViewState:
     trajectory: TrajectorySettings = field(default_factory=TrajectorySettings)
     use_loaded_path: bool = False
     export: ExportSettings = field(default_factory=ExportSettings)
+    photo_info: Optional[PhotoInfo] = None
+    stylize_available: bool = False
+    loaded_path: Optional[CameraPath] = None
+    playback: Optional[Playback] = None
 
     def __post_init__(self) -> None:
+        if not isinstance(self.spec, PhotoSpec):
+            raise InputError("spec", f"expected a PhotoSpec, got {type(self.spec).__name__}")
         check_range(self.strength, "strength", 0.0, 1.0)
         if self.view_fov is not None:
             check_fov(self.view_fov, "view fov")
-        if self.photo_fov is not None:
-            check_fov(self.photo_fov, "photo fov")
-        check_range(self.max_size, "max_size", 32, 8192)
         check_choice(self.trajectory.name, "trajectory", get_args(TrajectoryName))
-        if self.refine_depth is not None:
-            check_choice(self.refine_depth, "refine_depth", REFINE_METHODS)
+
+
+def shows_stylized(state: ViewState) -> bool:
+    """Whether the view (and what is exported or saved from it) goes through the model:
+    the user asked for the stylized view and the open photo is encoded for it."""
+    return bool(state.stylized and state.stylize_available and state.photo_info is not None)
+
+
+def user_choices(state: ViewState) -> ViewState:
+    """``state`` without what was loaded or is playing (for reports: no arrays, no cameras)."""
+    return replace(state, photo_info=None, loaded_path=None, playback=None)
 
 
 def view_fov(state: ViewState, photo_fov_deg: float) -> float:

@@ -10,8 +10,13 @@ Threads:
   tick timer (rest detection, camera-path preview);
 * the **compute worker** (:class:`~app.viewer.worker.ComputeWorker`) runs the
   :class:`~app.viewer.session.ViewerSession`: loading, encoding, styles,
-  renders, export. Its results come back through :meth:`ViewerWindow._post`
+  renders, export. Its results come back through :meth:`ViewerWindow.post`
   (``gui.Application.instance.post_to_main_thread``).
+
+Composition: this class owns the widgets, the live view (mouse, keys, frame
+scheduling) and closing; what the panel's buttons do is in three controllers
+(:mod:`app.viewer.actions`): ``photos``, ``paths`` and ``exports``. All app
+state is one :class:`~app.viewer.state.ViewState` in ``self.state``.
 
 Closing: a close request first stops the worker (and the test-script thread),
 then a helper thread waits for them and posts the real ``window.close()``; so no
@@ -32,16 +37,16 @@ import open3d as o3d
 import open3d.visualization.gui as gui
 
 from stylize3d_core.errors import InputError
-from stylize3d_core.io.camera_path import CameraPath
+from stylize3d_core.pipeline import PhotoSpec
 from stylize3d_core.render.plain import frame_size
 
 from . import panel as P
-from .actions import WindowActions, ui_callback
+from .actions import CameraPathController, ExportController, PhotoController, ui_callback
 from .orbit import HOME, OrbitLimits, apply_drag, apply_wheel, orbit
-from .session import NO_MODEL, PhotoInfo, ViewerSession, ViewFrame
+from .session import NO_MODEL, ViewerSession, ViewFrame
 from .state import (
-    FrameScheduler, PreviewSettings, ViewState, adapt_preview_long_side, full_frame_size, view_camera,
-    view_fov,
+    VIEWER_MAX_SIZE, FrameScheduler, PreviewSettings, ViewState, adapt_preview_long_side, full_frame_size,
+    shows_stylized, view_camera, view_fov,
 )
 from .worker import ComputeWorker, RenderResult
 
@@ -50,25 +55,35 @@ DOUBLE_CLICK_S = 0.35
 
 @dataclass(frozen=True)
 class ViewerOptions:
-    """Start-up options (from the command line). See ``app.viewer.entrypoint`` for each flag."""
+    """Start-up options (from the command line). See ``app.viewer.entrypoint`` for each flag.
 
-    photo: Optional[str] = None
+    Attributes:
+        spec: the photo to open (``spec.photo``, or None) and how it becomes a 3D photo.
+        style: style image to apply, or None.
+        model: model checkpoint, or None for the shipped one (if present).
+        use_model: False shows the plain 3D photo even when a model is available.
+        strength: style strength in [0, 1].
+        width, height: window size in pixels.
+    """
+
+    spec: PhotoSpec = PhotoSpec(max_size=VIEWER_MAX_SIZE)
     style: Optional[str] = None
-    depth: str = "auto"
-    refine_depth: Optional[str] = None
     model: Optional[str] = None
     use_model: bool = True
-    max_size: int = 640
-    fov: Optional[float] = None
     strength: float = 0.8
     width: int = 1280
     height: int = 800
 
 
-class ViewerWindow(WindowActions):
-    """The viewer's window, widgets and callbacks (see the module docstring).
+class ViewerWindow:
+    """The viewer's window, widgets and view callbacks, composed with its controllers (see the module docstring).
 
-    Thread use: GUI main thread only, except :meth:`_post` and :meth:`call_on_main`
+    ``photos`` (:class:`~app.viewer.actions.PhotoController`), ``paths``
+    (:class:`~app.viewer.actions.CameraPathController`) and ``exports``
+    (:class:`~app.viewer.actions.ExportController`) do the rest; all app state is
+    ``state`` (:class:`~app.viewer.state.ViewState`).
+
+    Thread use: GUI main thread only, except :meth:`post` and :meth:`call_on_main`
     (any thread) and the worker callbacks they wrap.
     """
 
@@ -76,16 +91,16 @@ class ViewerWindow(WindowActions):
         self.app = gui.Application.instance
         self._main_ident = threading.get_ident()
         self.options = options
-        self.state = ViewState(depth=options.depth, refine_depth=options.refine_depth, model=options.model, max_size=options.max_size,
-                               photo_fov=options.fov, strength=options.strength)
+        self.state = ViewState(spec=replace(options.spec, photo=None), model=options.model,
+                               strength=options.strength)
         self.limits = OrbitLimits()
         self.preview = PreviewSettings()
         self.scheduler = FrameScheduler(self.preview.rest_delay_s)
         self.session = ViewerSession(options.model, use_model=options.use_model)
         self.worker = ComputeWorker(on_error=lambda name, e: self._post(lambda: self.show_error(name, e)))
-        self.info: Optional[PhotoInfo] = None
-        self.loaded_path: Optional[CameraPath] = None
-        self.stylize_available = False
+        self.photos = PhotoController(self)
+        self.paths = CameraPathController(self)
+        self.exports = ExportController(self, self.paths)
         self.errors: List[str] = []
         self.stats: Dict[str, Any] = {"preview_seconds": [], "full_seconds": [], "full_latency": [], "preview_shown": [],
                                       "preview_latency": [], "post_delay": []}
@@ -97,16 +112,14 @@ class ViewerWindow(WindowActions):
         self._requested_at: Dict[int, float] = {}
         self._drag: Optional[List[Any]] = None  # [mode, last x, last y]
         self._last_click = (-1.0, 0, 0)
-        self._playback: Optional[Dict[str, Any]] = None
-        self._export_cancel: Optional[threading.Event] = None
         self._closing = False
         self._shutdown_done = False
         self._build()
         self.worker.start()
         if options.style:
-            self.open_style(options.style)
-        if options.photo:
-            self.open_photo(options.photo)
+            self.photos.open_style(options.style)
+        if options.spec.photo:
+            self.photos.open_photo(options.spec.photo)
 
     # -- construction -------------------------------------------------------------
     def _build(self) -> None:
@@ -118,41 +131,42 @@ class ViewerWindow(WindowActions):
         self.image.set_on_mouse(self._on_mouse)
         self.image.set_on_key(self._on_view_key)
         self.panel = p = P.Panel(em, self.state)
+        ph, cp, ex = self.photos, self.paths, self.exports
         for child in (self.image, p.root, p.status_box, p.help):
             w.add_child(child)
         w.set_on_layout(self._on_layout)
         w.set_on_key(self._on_window_key)
         w.set_on_tick_event(self._on_tick)
         w.set_on_close(self._on_close)
-        p.open_photo.set_on_clicked(self._on_open_photo)
-        p.sample.set_on_clicked(self._on_sample)
-        p.open_style.set_on_clicked(self._on_open_style)
-        p.depth.set_on_selection_changed(self._on_depth_choice)
-        p.depth_file.set_on_clicked(self._on_open_depth)
-        p.refine.set_on_selection_changed(self._on_refine_choice)
+        p.open_photo.set_on_clicked(ph.on_open_photo)
+        p.sample.set_on_clicked(ph.on_sample)
+        p.open_style.set_on_clicked(ph.on_open_style)
+        p.depth.set_on_selection_changed(ph.on_depth_choice)
+        p.depth_file.set_on_clicked(ph.on_open_depth)
+        p.refine.set_on_selection_changed(ph.on_refine_choice)
         p.stylized.set_on_clicked(self._on_stylized)
         p.strength.set_on_value_changed(self._on_strength)
         p.fov.set_on_value_changed(self._on_fov)
         p.reset.set_on_clicked(self._on_reset_view)
-        p.trajectory.set_on_selection_changed(self._on_trajectory)
+        p.trajectory.set_on_selection_changed(cp.on_trajectory)
         for n in (p.amp_x, p.amp_y, p.forward):
-            n.set_on_value_changed(self._on_trajectory_params)
-        p.preview_path.set_on_clicked(self._on_preview_path)
-        p.load_path.set_on_clicked(self._on_load_path)
-        p.save_path.set_on_clicked(self._on_save_path)
-        p.format.set_on_selection_changed(self._on_export_params)
+            n.set_on_value_changed(cp.on_trajectory_params)
+        p.preview_path.set_on_clicked(cp.toggle_preview)
+        p.load_path.set_on_clicked(cp.on_load_path)
+        p.save_path.set_on_clicked(cp.on_save_path)
+        p.format.set_on_selection_changed(ex.on_export_params)
         for n in (p.size, p.frames, p.fps):
-            n.set_on_value_changed(self._on_export_params)
-        p.export.set_on_clicked(self._on_export)
-        p.screenshot.set_on_clicked(self._on_screenshot)
-        p.cancel.set_on_clicked(self._on_cancel)
+            n.set_on_value_changed(ex.on_export_params)
+        p.export.set_on_clicked(ex.on_export)
+        p.screenshot.set_on_clicked(ex.on_screenshot)
+        p.cancel.set_on_clicked(ex.on_cancel)
         p.set_enabled(False)
         menu = {
-            P.MENU_OPEN: self._on_open_photo, P.MENU_STYLE: self._on_open_style, P.MENU_DEPTH: self._on_open_depth,
-            P.MENU_SAMPLE: self._on_sample, P.MENU_LOAD_PATH: self._on_load_path, P.MENU_SAVE_PATH: self._on_save_path,
-            P.MENU_EXPORT: self._on_export, P.MENU_SCREENSHOT: self._on_screenshot, P.MENU_QUIT: self._on_quit,
+            P.MENU_OPEN: ph.on_open_photo, P.MENU_STYLE: ph.on_open_style, P.MENU_DEPTH: ph.on_open_depth,
+            P.MENU_SAMPLE: ph.on_sample, P.MENU_LOAD_PATH: cp.on_load_path, P.MENU_SAVE_PATH: cp.on_save_path,
+            P.MENU_EXPORT: ex.on_export, P.MENU_SCREENSHOT: ex.on_screenshot, P.MENU_QUIT: self._on_quit,
             P.MENU_STYLIZED: self._on_stylized_menu, P.MENU_RESET: self._on_reset_view,
-            P.MENU_PREVIEW: self._on_preview_path, P.MENU_HELP: self._on_help, P.MENU_ABOUT: self._on_about,
+            P.MENU_PREVIEW: cp.toggle_preview, P.MENU_HELP: self._on_help, P.MENU_ABOUT: self._on_about,
         }
         for item, cb in menu.items():
             w.set_on_menu_item_activated(item, cb)
@@ -171,13 +185,30 @@ class ViewerWindow(WindowActions):
         self._update_display_size()
 
     def _update_display_size(self) -> None:
-        if self.info is None:
+        info = self.state.photo_info
+        if info is None:
             return
         f = self.image.frame
-        hw = full_frame_size(self.info.size, (f.height, f.width), self.preview.full_long_side)
+        hw = full_frame_size(info.size, (f.height, f.width), self.preview.full_long_side)
         if hw != self._display_hw:
             self._display_hw = hw
-            self._view_changed()
+            self.view_changed()
+
+    def photo_changed(self) -> None:
+        """A new photo is open (``state.photo_info``): size the view for it and request its first frame."""
+        self._display_hw = (0, 0)
+        self._update_display_size()
+
+    @property
+    def display_hw(self) -> Tuple[int, int]:
+        """(H, W) of the full-resolution frame the view shows."""
+        return self._display_hw
+
+    def final_frame(self) -> Optional[ViewFrame]:
+        """The frame on screen if it is the full frame of the current view, else None."""
+        if self.scheduler.settled and self._shown is not None and not self._shown.preview:
+            return self._shown
+        return None
 
     # -- threads ------------------------------------------------------------------
     def post(self, fn: Callable[[], None]) -> None:
@@ -235,28 +266,48 @@ class ViewerWindow(WindowActions):
         self.panel.status.text = f"Error ({what})"
         self.window.show_message_box("stylize3d: " + what, message)
 
-    def _set_status(self, text: str) -> None:
+    def set_status(self, text: str) -> None:
+        """Show ``text`` in the status line."""
         self.panel.status.text = text
 
-    def _set_busy(self, text: Optional[str], fraction: Optional[float] = None) -> None:
+    def set_busy(self, text: Optional[str], fraction: Optional[float] = None) -> None:
+        """Show ``text`` (if not None) in the status line and ``fraction`` (None: none) on the progress bar."""
         if text is not None:
             self.panel.status.text = text
         self.panel.progress.value = 0.0 if fraction is None else float(min(1.0, max(0.0, fraction)))
 
+    def file_dialog(self, mode, title: str, filters, on_done: Callable[[str], None]) -> None:
+        """Show a file dialog; ``on_done(path)`` runs when a file is chosen (its errors become a dialog)."""
+        dlg = gui.FileDialog(mode, title, self.window.theme)
+        for ext, desc in filters:
+            dlg.add_filter(ext, desc)
+
+        def done(path: str) -> None:
+            self.window.close_dialog()
+            try:
+                on_done(path)
+            except Exception as e:  # reported to the user; the session stays usable
+                self.show_error(title, e)
+
+        dlg.set_on_cancel(self.window.close_dialog)
+        dlg.set_on_done(done)
+        self.window.show_dialog(dlg)
+
     # -- view changes and rendering -----------------------------------------------------
-    def _view_changed(self) -> None:
+    def view_changed(self) -> None:
         """The view changed: ask for a preview now; the tick asks for the full frame once it rests."""
         self.scheduler.changed(time.monotonic())
-        self._request_render(preview=True)
+        self.request_render(preview=True)
 
-    def _request_render(self, preview: bool, camera=None) -> None:
-        if self.info is None or self._display_hw == (0, 0):
+    def request_render(self, preview: bool, camera=None) -> None:
+        """Ask the worker for a frame of the view (or of ``camera``): a preview or the full frame."""
+        info = self.state.photo_info
+        if info is None or self._display_hw == (0, 0):
             return
-        info = self.info
         cam = camera if camera is not None else view_camera(self.state, info.scene, info.fov_y_deg)
         display = self._display_hw
         size = frame_size(info.size, min(self._preview_side, max(display))) if preview else display
-        stylized = self.state.stylized and self.stylize_available
+        stylized = shows_stylized(self.state)
         version = self.scheduler.version
         session = self.session
 
@@ -318,17 +369,17 @@ class ViewerWindow(WindowActions):
         if self._closing:
             return False
         now = time.monotonic()
-        if self._playback is not None:
-            self._step_playback(now)
-        elif self.info is not None and self.scheduler.full_due(now):
-            self._request_render(preview=False)
+        if self.state.playback is not None:
+            self.paths.step(now)
+        elif self.state.photo_info is not None and self.scheduler.full_due(now):
+            self.request_render(preview=False)
         return False
 
     # -- camera control ---------------------------------------------------------------
     @ui_callback
     def _on_mouse(self, e: gui.MouseEvent) -> int:
         T = gui.MouseEvent.Type
-        if self.info is None:
+        if self.state.photo_info is None:
             return gui.Widget.EventCallbackResult.IGNORED
         if e.type == T.BUTTON_DOWN:
             now = time.monotonic()
@@ -357,32 +408,33 @@ class ViewerWindow(WindowActions):
 
     def drag(self, mode: str, dx: float, dy: float) -> None:
         """Apply a mouse drag of (dx, dy) view pixels ("orbit" or "pan"); the test hooks call this too."""
-        if self.info is None or (dx == 0 and dy == 0):
+        if self.state.photo_info is None or (dx == 0 and dy == 0):
             return
-        self._stop_playback()
+        self.paths.stop()
         view_h = max(1, self.image.frame.height)
-        pose = apply_drag(self.state.pose, mode, dx, dy, view_h, view_fov(self.state, self.info.fov_y_deg),
-                          self.info.scene, self.limits)
+        info = self.state.photo_info
+        pose = apply_drag(self.state.pose, mode, dx, dy, view_h, view_fov(self.state, info.fov_y_deg),
+                          info.scene, self.limits)
         if pose != self.state.pose:
             self.state = replace(self.state, pose=pose)
-            self._view_changed()
+            self.view_changed()
 
     def wheel(self, ticks: float) -> None:
         """Move forwards by ``ticks`` wheel steps (negative: backwards)."""
-        if self.info is None:
+        if self.state.photo_info is None:
             return
-        pose = apply_wheel(self.state.pose, ticks, self.info.scene, self.limits)
+        pose = apply_wheel(self.state.pose, ticks, self.state.photo_info.scene, self.limits)
         if pose != self.state.pose:
             self.state = replace(self.state, pose=pose)
-            self._view_changed()
+            self.view_changed()
 
     def reset_view(self) -> None:
         """Back to the photo's own camera and FOV."""
-        self._stop_playback()
+        self.paths.stop()
         self.state = replace(self.state, pose=HOME, view_fov=None)
-        if self.info is not None:
-            self.panel.fov.double_value = self.info.fov_y_deg
-        self._view_changed()
+        if self.state.photo_info is not None:
+            self.panel.fov.double_value = self.state.photo_info.fov_y_deg
+        self.view_changed()
 
     @ui_callback
     def _on_reset_view(self) -> None:
@@ -391,7 +443,7 @@ class ViewerWindow(WindowActions):
     @ui_callback
     def _on_fov(self, value: float) -> None:
         self.state = replace(self.state, view_fov=float(value))
-        self._view_changed()
+        self.view_changed()
 
     @ui_callback
     def _on_window_key(self, e: gui.KeyEvent) -> bool:
@@ -408,10 +460,11 @@ class ViewerWindow(WindowActions):
         if e.type != gui.KeyEvent.Type.DOWN:
             return ignored
         K = gui.KeyName
+        ph, cp, ex = self.photos, self.paths, self.exports
         actions = {
-            K.O: self._on_open_photo, K.S: self._on_open_style, K.D: self._on_open_depth, K.M: self.load_sample,
-            K.T: self._on_stylized_menu, K.R: self.reset_view, K.C: self._on_preview_path, K.E: self._on_export,
-            K.P: self._on_screenshot, K.H: self._on_help, K.ESCAPE: self._on_escape,
+            K.O: ph.on_open_photo, K.S: ph.on_open_style, K.D: ph.on_open_depth, K.M: ph.load_sample,
+            K.T: self._on_stylized_menu, K.R: self.reset_view, K.C: cp.toggle_preview, K.E: ex.on_export,
+            K.P: ex.on_screenshot, K.H: self._on_help, K.ESCAPE: self._on_escape,
             K.LEFT: lambda: self._nudge(-1, 0), K.RIGHT: lambda: self._nudge(1, 0),
             K.UP: lambda: self._nudge(0, 1), K.DOWN: lambda: self._nudge(0, -1),
             K.PLUS: lambda: self.wheel(1), K.EQUALS: lambda: self.wheel(1), K.MINUS: lambda: self.wheel(-1),
@@ -426,10 +479,11 @@ class ViewerWindow(WindowActions):
         return consumed
 
     def _nudge(self, yaw: float, pitch: float) -> None:
-        if self.info is None:
+        if self.state.photo_info is None:
             return
-        self.state = replace(self.state, pose=orbit(self.state.pose, yaw, pitch, self.info.scene, self.limits))
-        self._view_changed()
+        scene = self.state.photo_info.scene
+        self.state = replace(self.state, pose=orbit(self.state.pose, yaw, pitch, scene, self.limits))
+        self.view_changed()
 
     # -- look: stylized / original, strength ----------------------------------------------------
     @ui_callback
@@ -446,9 +500,9 @@ class ViewerWindow(WindowActions):
         self.panel.stylized.is_on = on
         if self.app.menubar is not None:
             self.app.menubar.set_checked(P.MENU_STYLIZED, on)
-        if on and not self.stylize_available:
-            self._set_status(NO_MODEL)
-        self._view_changed()
+        if on and not self.state.stylize_available:
+            self.set_status(NO_MODEL)
+        self.view_changed()
 
     @ui_callback
     def _on_strength(self, value: float) -> None:
@@ -461,7 +515,7 @@ class ViewerWindow(WindowActions):
         if abs(self.panel.strength.double_value - a) > 1e-9:
             self.panel.strength.double_value = a
         self.worker.submit("strength", lambda: self.session.set_strength(a), key="strength")
-        self._view_changed()
+        self.view_changed()
 
     # -- help, about, quit ---------------------------------------------------------------
     @ui_callback
@@ -476,13 +530,20 @@ class ViewerWindow(WindowActions):
             "(3D Photo Stylization, Mu et al., CVPR 2022). Drag to look around; export videos from the File menu.")
 
     @ui_callback
+    def _on_escape(self) -> None:
+        if self.panel.help.visible:
+            self._on_help()
+        else:
+            self.exports.on_cancel()
+
+    @ui_callback
     def _on_quit(self) -> None:
         self.request_close()
 
     def is_settled(self) -> bool:
         """True when the full frame of the current view is on screen and no work is left (test hooks)."""
-        return (self.info is not None and self.scheduler.settled and self.worker.is_idle()
-                and not self.exporting and self._playback is None)
+        return (self.state.photo_info is not None and self.scheduler.settled and self.worker.is_idle()
+                and not self.exports.exporting and self.state.playback is None)
 
     # -- closing ---------------------------------------------------------------------------
     def _on_close(self) -> bool:
@@ -496,8 +557,7 @@ class ViewerWindow(WindowActions):
         if self._closing:
             return
         self._closing = True
-        if self._export_cancel is not None:
-            self._export_cancel.set()
+        self.exports.cancel()
         self.worker.stop(timeout=0)
         waiting = [t for t in (self.worker.thread, self.script_thread) if t is not None]
 

@@ -70,11 +70,36 @@ def test_refine_depth_changes_the_geometry(photo, tmp_path, capsys):
     assert e.value.code == 2 and "median" in capsys.readouterr().err
 
 
+def test_relief_exaggerates_the_depth_and_keeps_the_photo_view(photo, tmp_path):
+    """--relief k raises every depth to the power k before the scene is normalised: the nearest surface stays
+    at NEAR_DEPTH, so log(z / NEAR_DEPTH) scales by k, and every photo pixel stays on its own ray."""
+    from stylize3d_core.geometry.camera import NEAR_DEPTH
+    from stylize3d_core.scene.pointcloud import ORIGINAL
+
+    common = ["render", str(photo), "--frames", "2", "--size", "48", "--depth", "prior", "-q"]
+    clouds = {}
+    for k in ("1", "2", "0.5"):
+        ply = tmp_path / f"relief{k}.ply"
+        assert main(common + ["--relief", k, "-o", str(tmp_path / f"v{k}.mp4"), "--save-ply", str(ply)]) == 0
+        cloud = read_ply(ply)
+        clouds[k] = cloud.xyz[cloud.labels == ORIGINAL]  # one point per photo pixel, in pixel order
+    base = clouds["1"]
+    for k, cloud in (("2", clouds["2"]), ("0.5", clouds["0.5"])):
+        assert cloud.shape == base.shape
+        spread = np.log(np.median(base[:, 2]) / NEAR_DEPTH)
+        assert spread > 0.1
+        np.testing.assert_allclose(np.log(np.median(cloud[:, 2]) / NEAR_DEPTH), float(k) * spread, rtol=0.1)
+        # Points move along their rays: the photo's own camera sees the same picture.
+        np.testing.assert_allclose(cloud[:, :2] / cloud[:, 2:], base[:, :2] / base[:, 2:], atol=1e-4)
+    assert main(common + ["--relief", "5", "-o", str(tmp_path / "bad.mp4")]) == 2
+    assert not (tmp_path / "bad.mp4").exists()
+
+
 @pytest.mark.parametrize("args, needle", [
     (["render", "{missing}"], "not found"),
     (["render", "{photo}", "--depth", "{missing}"], "missing.png"),
     (["render", "{photo}", "--size", "3"], "size"),
-    (["render", "{photo}", "--frames", "0"], "n_frames"),
+    (["render", "{photo}", "--frames", "0"], "frames: must be an integer from 1"),
     (["render", "{photo}", "-o", "{tmp}/x.avi"], ".avi"),
     (["render", "{photo}", "--style", "{missing}"], "missing.png"),
     (["render", "{photo}", "--camera-path", "{photo}"], "photo.png"),
@@ -92,3 +117,79 @@ def test_failed_export_keeps_the_old_file(photo, tmp_path):
     rc = main(["render", str(photo), "--depth", str(tmp_path / "missing.npy"), "-o", str(out), "-q"])
     assert rc == 2 and out.read_bytes() == b"precious"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.mp4"]
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--fps", "1e-9"], "fps: must be a number from 1 to 240"),
+    (["--fps", "1e9"], "fps: must be a number from 1 to 240"),
+    (["--fps", "nan"], "fps: must be a finite number"),
+    (["--fps", "inf"], "fps: must be a finite number"),
+    (["--fps", "60", "-o", "{out}/v.gif"], "a GIF plays at most 50 fps"),
+    (["--frames", "10001"], "frames: must be an integer from 1 to 10000"),
+    (["--size", "8"], "size: must be an integer from 16 to 4096"),
+    (["--size", "100000"], "size: must be an integer from 16 to 4096"),
+    (["--max-size", "4"], "max_size: must be an integer from 32 to 8192"),
+    (["--strength", "1.5"], "strength: must be a number from 0 to 1"),
+    (["--strength=-inf"], "strength: must be a finite number"),
+    (["--fov", "0"], "fov: must be a number from 1 to 170"),
+    (["--fov", "nan"], "fov: must be a finite number"),
+    (["-o", "{out}/v.avi"], "unsupported video format '.avi'"),
+    (["-o", "{out}/no/such/folder/v.mp4"], "does not exist"),
+    (["--save-ply", "{out}/c.txt"], "must end in .ply"),
+    (["--save-ply", "{out}/missing/c.ply"], "does not exist"),
+    (["--save-camera-path", "{out}/c.txt"], "must end in .json"),
+    (["--save-ply", "{folder}"], "is a folder"),
+    (["--save-camera-path", "{out}/same.json", "--camera-path", "{out}/same.json"], "both an input and an output"),
+    (["-o", "{photo}"], "unsupported video format '.png'"),
+])
+def test_every_option_is_checked_before_anything_is_written(photo, tmp_path, capsys, args, needle):
+    """Bad numbers (out of range or not finite) and bad output paths: exit 2 naming the option or the file,
+    and no output at all, not even the --save-ply / --save-camera-path written before the video."""
+    out = tmp_path / "out"
+    out.mkdir()
+    folder = tmp_path / "folder.ply"
+    folder.mkdir()
+    fill = {"out": str(out), "photo": str(photo), "folder": str(folder)}
+    argv = [a.format(**fill) for a in args]
+    defaults = {"-o": str(out / "v.mp4"), "--save-ply": str(out / "c.ply"),
+                "--save-camera-path": str(out / "c.json")}
+    for flag, value in defaults.items():
+        if flag not in argv:
+            argv += [flag, value]
+    before = sorted(p.name for p in photo.parent.iterdir())
+    rc = main(["render", str(photo), "--frames", "2", "--size", "32", "-q"] + argv)
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert needle in err, err
+    assert list(out.rglob("*")) == [] and list(folder.iterdir()) == []
+    assert sorted(p.name for p in photo.parent.iterdir()) == before
+
+
+def test_a_camera_path_too_fast_for_a_gif_is_refused_before_writing(photo, tmp_path, capsys):
+    from stylize3d_core.geometry.trajectories import static
+    from stylize3d_core.io.camera_path import save_camera_path
+
+    cams = save_camera_path(tmp_path / "fast.json", static(3), fps=120)
+    ply = tmp_path / "c.ply"
+    rc = main(["render", str(photo), "--camera-path", str(cams), "-o", str(tmp_path / "v.gif"),
+               "--save-ply", str(ply), "-q"])
+    assert rc == 2 and "too fast for a GIF" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fast.json"]
+
+
+def test_render_options_are_the_job_fields():
+    """The render command's options are derived from RenderJob and PhotoSpec: one per field, same defaults."""
+    import dataclasses
+
+    from app.cli import build_parser
+    from stylize3d_core.pipeline import PhotoSpec, RenderJob
+
+    args = build_parser().parse_args(["render", "p.jpg"])
+    job = RenderJob()
+    for f in dataclasses.fields(RenderJob):
+        if f.name != "spec":
+            assert getattr(args, f.name) == getattr(job, f.name), f.name
+    for f in dataclasses.fields(PhotoSpec):
+        if f.name not in ("photo", "ldi"):
+            assert getattr(args, f.name) == getattr(job.spec, f.name), f.name
+    assert args.photo == "p.jpg" and not hasattr(args, "ldi")

@@ -159,7 +159,7 @@ def test_open_orbit_export_and_survive_bad_files(display, tmp_path):
     assert json.loads((tmp_path / "path.json").read_text())["format"] == "stylize3d-camera-path"
     state = step(report, "state")["result"]
     assert state["use_loaded_path"] is True  # the good path stayed loaded after the bad one failed
-    assert state["photo"].endswith("coffee.jpg")  # the bad photo did not replace the good one
+    assert state["spec"]["photo"].endswith("coffee.jpg")  # the bad photo did not replace the good one
     assert np.abs(pixels(tmp_path / "still_usable.png") - after).mean() > 2  # still there, still moving
     window = pixels(tmp_path / "window.png")
     assert window.shape[0] > 200 and window.std() > 20
@@ -227,7 +227,7 @@ def test_stylized_view_strength_style_export_and_no_freeze(display, tmp_path, un
     assert np.abs(original - moved).mean() > 10, "stylized and original views look the same"
     assert original.std() > 20
     state = step(report, "state")["result"]
-    assert state["refine_depth"] == "bilateral_median" and state["photo"].endswith("coffee.jpg")
+    assert state["spec"]["refine_depth"] == "bilateral_median" and state["spec"]["photo"].endswith("coffee.jpg")
 
 
 def _xtest():

@@ -20,6 +20,7 @@ from app.viewer.session import (
 )
 from stylize3d_core.render.plain import frame_size
 from stylize3d_core.errors import InputError
+from stylize3d_core.pipeline import PhotoSpec
 from stylize3d_core.geometry.trajectories import circle
 from stylize3d_core.io.video import ExportCancelled
 from stylize3d_core.render.plain import PREVIEW_MIN_POINTS, preview_point_count
@@ -30,7 +31,7 @@ MAX_SIZE = 160
 @pytest.fixture(scope="module")
 def plain() -> ViewerSession:
     s = ViewerSession(model=None)
-    s.load_photo(str(SAMPLE_PHOTO), "prior", max_size=MAX_SIZE)
+    s.load_photo(PhotoSpec(str(SAMPLE_PHOTO), "prior", max_size=MAX_SIZE))
     return s
 
 
@@ -57,14 +58,14 @@ def test_plain_view_is_the_photo_and_orbit_shows_parallax(plain):
 
 def test_refined_depth_rebuilds_the_photo_with_aligned_edges(plain):
     s = ViewerSession(model=None)
-    s.load_photo(str(SAMPLE_PHOTO), "prior", max_size=MAX_SIZE, refine_depth="bilateral_median")
+    s.load_photo(PhotoSpec(str(SAMPLE_PHOTO), "prior", max_size=MAX_SIZE, refine_depth="bilateral_median"))
     assert s.info.size == plain.info.size
     assert "prior" in s.photo.depth.source
     refined, raw = s.photo.depth.depth, plain.photo.depth.depth
     assert refined.shape == raw.shape and np.isfinite(refined).all()
     assert not np.allclose(refined, raw)  # the edges moved
-    with pytest.raises(InputError, match="refine method"):
-        s.load_photo(str(SAMPLE_PHOTO), "prior", max_size=MAX_SIZE, refine_depth="median")
+    with pytest.raises(InputError, match="refine_depth"):  # the spec refuses it before any work
+        s.load_photo(PhotoSpec(str(SAMPLE_PHOTO), "prior", max_size=MAX_SIZE, refine_depth="median"))
     assert s.photo.depth.depth is refined  # the failed load kept the refined photo
 
 
@@ -94,10 +95,10 @@ def test_bad_files_keep_what_was_loaded(plain, tmp_path):
     broken.write_bytes(b"\xff\xd8\xff\xe0 not really a jpeg")
     for bad in (tmp_path / "missing.jpg", broken):
         with pytest.raises(InputError, match=bad.name):
-            plain.load_photo(str(bad), "prior", max_size=MAX_SIZE)
+            plain.load_photo(PhotoSpec(str(bad), "prior", max_size=MAX_SIZE))
         assert plain.info is info and plain.photo is photo
     with pytest.raises(InputError, match="depth"):
-        plain.load_photo(str(SAMPLE_PHOTO), "nosuchsource:x", max_size=MAX_SIZE)
+        plain.load_photo(PhotoSpec(str(SAMPLE_PHOTO), "nosuchsource:x", max_size=MAX_SIZE))
     with pytest.raises(InputError, match="missing.png"):
         plain.load_style(str(tmp_path / "missing.png"))
     assert plain.info is info and plain.style_path is None
@@ -119,7 +120,7 @@ def test_bad_model_file_is_an_error(tmp_path, plain, name, content):
 @pytest.mark.slow
 def test_stylized_view_restyle_reuses_the_encoding(untrained):
     s = ViewerSession(model=str(untrained))
-    s.load_photo(str(SAMPLE_PHOTO), "prior", max_size=MAX_SIZE)
+    s.load_photo(PhotoSpec(str(SAMPLE_PHOTO), "prior", max_size=MAX_SIZE))
     r = s.prepare_stylized()
     assert r.available and "stage 1" in r.message and s.can_stylize
     base = render(s, stylized=True)

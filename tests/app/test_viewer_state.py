@@ -9,11 +9,13 @@ import torch
 
 from app.viewer.orbit import HOME, OrbitPose, OrbitScene, cam_to_world
 from app.viewer.state import (
-    ExportSettings, FrameScheduler, PreviewSettings, ViewState, adapt_preview_long_side, clamp_state_pose,
-    export_destination, fov_range, full_frame_size, trajectory_cameras, view_camera, view_fov,
+    VIEWER_MAX_SIZE, ExportSettings, FrameScheduler, PhotoInfo, Playback, PreviewSettings, ViewState,
+    adapt_preview_long_side, clamp_state_pose, export_destination, fov_range, full_frame_size, playback_frame,
+    shows_stylized, trajectory_cameras, user_choices, view_camera, view_fov,
 )
 from stylize3d_core.errors import InputError
 from stylize3d_core.geometry.trajectories import TrajectorySettings, make_trajectory, static
+from stylize3d_core.pipeline import PhotoSpec
 from stylize3d_core.render.plain import frame_size
 
 SCENE = OrbitScene(centre_depth=0.7)
@@ -28,9 +30,13 @@ def test_defaults_are_valid_and_bad_values_refused():
         ViewState(trajectory=TrajectorySettings(name="spiral"))
     with pytest.raises(InputError, match="view fov"):
         ViewState(view_fov=0.0)
-    assert s.refine_depth is None and ViewState(refine_depth="guided").refine_depth == "guided"
+    assert s.spec.refine_depth is None
+    assert ViewState(spec=PhotoSpec(refine_depth="guided")).spec.refine_depth == "guided"
     with pytest.raises(InputError, match="refine_depth"):
-        ViewState(refine_depth="median")
+        ViewState(spec=replace(s.spec, refine_depth="median"))
+    assert s.spec.max_size == VIEWER_MAX_SIZE and s.spec.photo is None
+    with pytest.raises(InputError, match="spec"):
+        ViewState(spec="photo.jpg")
 
 
 @pytest.mark.parametrize("kwargs, match", [
@@ -141,3 +147,34 @@ def test_trajectory_cameras_follow_the_view():
 def test_clamp_state_pose():
     s = ViewState(pose=OrbitPose(yaw_deg=90.0))
     assert clamp_state_pose(s, SCENE).pose.yaw_deg == 8.0
+
+
+def test_one_rule_says_whether_the_stylized_view_is_shown():
+    info = PhotoInfo("p.jpg", (30, 40), 1200, 60.0, "prior", SCENE, 0.1)
+    s = ViewState()
+    assert not shows_stylized(s)  # no photo
+    s = replace(s, photo_info=info)
+    assert not shows_stylized(s)  # the model is not ready (or there is none)
+    s = replace(s, stylize_available=True)
+    assert shows_stylized(s)
+    assert not shows_stylized(replace(s, stylized=False))  # the user asked for the original
+    assert not shows_stylized(replace(s, photo_info=None))
+
+
+def test_playback_plays_each_camera_at_its_time_then_ends():
+    cams = static(5)
+    pb = Playback(cams, start=100.0, fps=10.0)
+    assert pb.index == -1
+    assert [playback_frame(pb, 100.0 + t) for t in (0.0, 0.05, 0.11, 0.25, 0.49)] == [0, 0, 1, 2, 4]
+    assert playback_frame(pb, 100.51) is None and playback_frame(pb, 200.0) is None
+    assert playback_frame(pb, 99.0) == 0  # a clock read just before the start shows the first camera
+    with pytest.raises(InputError, match="playback fps"):
+        Playback(cams, 0.0, 0.0)
+
+
+def test_user_choices_leave_out_what_was_loaded():
+    info = PhotoInfo("p.jpg", (30, 40), 1200, 60.0, "prior", SCENE, 0.1)
+    s = ViewState(photo_info=info, stylize_available=True, playback=Playback(static(2), 0.0, 30.0))
+    c = user_choices(s)
+    assert c.photo_info is None and c.playback is None and c.loaded_path is None
+    assert c.stylize_available and c.spec == s.spec and c.pose == s.pose

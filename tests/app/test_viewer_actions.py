@@ -1,0 +1,120 @@
+"""The window's controllers (app/viewer/actions.py) against a stand-in window: no X server, no widgets.
+
+The controllers use the window only through its small surface (state, panel,
+session, worker, post, set_status/set_busy, view_changed, request_render, ...),
+so a plain object with those attributes runs them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from types import SimpleNamespace
+from typing import Any, List
+
+import pytest
+
+from app.viewer.actions import CameraPathController, ExportController, PhotoController
+from app.viewer.orbit import OrbitScene
+from app.viewer.state import PhotoInfo, ViewState
+from stylize3d_core.errors import InputError
+from stylize3d_core.geometry.trajectories import static
+from stylize3d_core.pipeline import PhotoSpec
+
+INFO = PhotoInfo("p.jpg", (30, 40), 1200, 60.0, "prior", OrbitScene(centre_depth=0.7), 0.1)
+
+
+class FakeWorker:
+    def __init__(self) -> None:
+        self.tasks: List[Any] = []
+
+    def submit(self, name, fn, on_done=None, on_error=None, key=None):
+        self.tasks.append((name, fn, on_done, on_error))
+
+
+class FakeWindow:
+    def __init__(self, state: ViewState) -> None:
+        self.state = state
+        self.worker = FakeWorker()
+        self.session = SimpleNamespace(load_photo=lambda spec: ("built", spec))
+        self.panel = SimpleNamespace(preview_path=SimpleNamespace(text="Preview (C)"))
+        self.status: List[str] = []
+        self.renders: List[Any] = []
+        self.changes = 0
+        self.errors: List[str] = []
+
+    def post(self, fn):
+        fn()
+
+    def set_status(self, text):
+        self.status.append(text)
+
+    def set_busy(self, text, fraction=None):
+        if text is not None:
+            self.status.append(text)
+
+    def show_error(self, what, e):
+        self.errors.append(f"{what}: {e}")
+
+    def view_changed(self):
+        self.changes += 1
+
+    def request_render(self, preview, camera=None):
+        self.renders.append((preview, camera))
+
+
+def test_photo_options_wait_for_the_next_photo_or_rebuild_the_open_one():
+    w = FakeWindow(ViewState())
+    photos = PhotoController(w)
+    photos.set_depth("prior")
+    photos.set_refine_depth("guided")
+    assert w.state.spec.depth == "prior" and w.state.spec.refine_depth == "guided" and w.state.spec.photo is None
+    assert w.status[-1] == "Depth edges: guided" and w.worker.tasks == []
+    with pytest.raises(InputError, match="relief"):
+        photos.change_spec("never shown", relief=100.0)
+    assert w.state.spec.relief == 1.0
+    # With a photo open, a new option rebuilds it on the worker; the state changes once it is built.
+    w.state = replace(w.state, spec=replace(w.state.spec, photo="p.jpg"), photo_info=INFO)
+    photos.change_spec("unused", relief=2.0)
+    (name, fn, _on_done, _on_error), = w.worker.tasks
+    assert name == "open photo" and w.state.spec.relief == 1.0
+    built, spec = fn()
+    assert spec == replace(w.state.spec, relief=2.0)
+
+
+def test_camera_path_preview_requests_each_camera_once_then_stops():
+    w = FakeWindow(ViewState(photo_info=INFO))
+    paths = CameraPathController(w)
+    paths.toggle_preview()
+    pb = w.state.playback
+    assert paths.playing and len(pb.cameras) == w.state.export.frames
+    assert w.panel.preview_path.text == "Stop preview (C)"
+    w.state = replace(w.state, playback=replace(pb, cameras=static(3), start=0.0, fps=10.0))
+    for now in (0.0, 0.05, 0.1, 0.15, 0.2):
+        paths.step(now)
+    assert [r[0] for r in w.renders] == [True, True, True]  # cameras 0, 1, 2: previews, once each
+    assert w.state.playback.index == 2 and w.changes == 0
+    paths.step(0.3)
+    assert w.state.playback is None and not paths.playing and w.changes == 1
+    assert w.panel.preview_path.text == "Preview (C)"
+
+
+@pytest.mark.parametrize("available, stylized, expected", [
+    (False, True, False), (True, True, True), (True, False, False),
+])
+def test_export_needs_a_photo_and_uses_the_one_rule_for_stylized(tmp_path, available, stylized, expected):
+    w = FakeWindow(ViewState())
+    w.panel.cancel, w.panel.export = SimpleNamespace(enabled=False), SimpleNamespace(enabled=True)
+    w.worker.serve_pending_render = lambda: None
+    w.session.export = lambda job, progress, between: job
+    exports = ExportController(w, CameraPathController(w))
+    with pytest.raises(InputError, match="open a photo first"):
+        exports.start_export(str(tmp_path / "out.mp4"))
+    assert not exports.exporting
+    w.state = replace(w.state, photo_info=INFO, stylize_available=available, stylized=stylized)
+    dest = exports.start_export(str(tmp_path / "out"))
+    assert dest.endswith("out.mp4") and exports.exporting and w.panel.cancel.enabled
+    with pytest.raises(InputError, match="already running"):
+        exports.start_export(str(tmp_path / "again.mp4"))
+    (name, fn, on_done, _on_error), = w.worker.tasks
+    job = fn()
+    assert name == "export" and job.stylized is expected and len(job.cameras) == w.state.export.frames
