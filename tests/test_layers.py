@@ -15,6 +15,7 @@ FORBIDDEN = ("app", "open3d.visualization", "tkinter", "PySide6", "PyQt5", "PyQt
 LAYERS: Tuple[Tuple[str, ...], ...] = (
     ("errors",),
     ("checks",),
+    ("options",),
     ("geometry",),
     ("io",),
     ("depth",),
