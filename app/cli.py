@@ -18,6 +18,7 @@ from stylize3d_core.errors import ExportError, InputError, Stylize3DError
 from stylize3d_core.geometry.trajectories import TrajectoryName
 from stylize3d_core.io.video import ExportCancelled, console_progress
 from stylize3d_core.pipeline import RenderJob, run_render
+from stylize3d_core.resources import resolve_model
 
 PROG = "stylize3d"
 
@@ -152,7 +153,7 @@ def _render(args: argparse.Namespace) -> int:
         frames=args.frames, fps=args.fps, size=args.size, max_size=args.max_size, fov=args.fov,
         supersample=args.supersample, camera_path=args.camera_path,
         save_camera_path=args.save_camera_path, save_ply=args.save_ply, style=args.style,
-        strength=args.strength, model=args.model,
+        strength=args.strength, model=resolve_model(args.model) if args.style else args.model,
     )
     log = (lambda _msg: None) if args.quiet else (lambda msg: print(f"{PROG}: {msg}", file=sys.stderr))
     progress = None if args.quiet else console_progress("render")

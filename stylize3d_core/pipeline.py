@@ -19,13 +19,15 @@ from .io.images import load_image
 from .io.ply import write_ply
 from .io.video import Progress, write_video
 from .render.plain import PlainRenderer, PlainRenderSettings, frame_size
+from .resources import default_model
 from .scene.ldi import LDISettings
 from .scene.photo3d import Photo3D, Photo3DSettings
 
 Log = Callable[[str], None]
 
-DEFAULT_MODEL = str(Path(__file__).resolve().parents[1] / "assets" / "model" / "stylize3d_lite.safetensors")
-"""The trained lite checkpoint shipped with the repository (see assets/model/README.md)."""
+DEFAULT_MODEL = default_model()
+"""The shipped trained lite checkpoint's path in this install (``stylize3d_core.resources``; its
+provenance is ``model/README.md`` beside it)."""
 
 
 def _quiet(_: str) -> None:

@@ -19,6 +19,8 @@ import sys
 from typing import List, Optional
 
 from stylize3d_core.depth.refine import REFINE_METHODS
+from stylize3d_core.errors import InputError
+from stylize3d_core.resources import resolve_model
 
 from .session import DEFAULT_MODEL
 
@@ -39,8 +41,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="align depth edges with the photo's: bilateral_median, joint_bilateral or guided")
     models = p.add_mutually_exclusive_group()
     models.add_argument("--model", default=None, metavar="CHECKPOINT",
-                        help=f"model checkpoint (.safetensors); default {DEFAULT_MODEL.relative_to(DEFAULT_MODEL.parents[2])} "
-                             "when it exists, else the plain 3D photo is shown")
+                        help="model: a shipped model's name (lite) or a checkpoint (.safetensors); default: "
+                             f"the shipped lite model ({DEFAULT_MODEL}) when it is installed, else the plain "
+                             "3D photo is shown")
     models.add_argument("--no-model", action="store_true",
                         help="show the plain 3D photo even if a model is available")
     p.add_argument("--max-size", type=int, default=640, help="shrink the photo to this long side (default 640)")
@@ -69,6 +72,13 @@ def main(argv: Optional[List[str]] = None) -> int:
     if args.threads < 1:
         print(f"{PROG}: --threads must be >= 1, got {args.threads}", file=sys.stderr)
         return 2
+    model = args.model
+    if model is not None:
+        try:
+            model = resolve_model(model)  # a name ("lite") or a path
+        except InputError as e:
+            print(f"{PROG}: error: {e}", file=sys.stderr)
+            return 2
     import open3d.visualization.gui as gui
     import torch
 
@@ -81,7 +91,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     app = gui.Application.instance
     app.initialize()
     viewer = ViewerWindow(ViewerOptions(
-        photo=args.photo, style=args.style, depth=args.depth, refine_depth=args.refine_depth, model=args.model, use_model=not args.no_model,
+        photo=args.photo, style=args.style, depth=args.depth, refine_depth=args.refine_depth, model=model, use_model=not args.no_model,
         max_size=args.max_size,
         fov=args.fov, strength=args.strength, width=width, height=height))
     runner = None
