@@ -57,7 +57,7 @@ def _open3d() -> Report:
     config = getattr(open3d, "_build_config", {}) or {}
     return {
         "version": open3d.__version__,
-        "distribution": "open3d-cpu" if _dist_version("open3d-cpu") else ("open3d" if _dist_version("open3d") else None),
+        "distribution": next((d for d in ("open3d-cpu", "open3d") if _dist_version(d)), None),
         "gui_built": config.get("BUILD_GUI"),
         "cuda_built": config.get("BUILD_CUDA_MODULE"),
     }

@@ -85,7 +85,7 @@ def _checkout_assets() -> Optional[Path]:
 
 @functools.lru_cache(maxsize=None)
 def assets_location() -> AssetsLocation:
-    """Where ``model/``, ``samples/`` and ``styles/`` are (cached; call ``assets_location.cache_clear()`` to look again)."""
+    """Where ``model/``, ``samples/`` and ``styles/`` are (cached: ``assets_location.cache_clear()`` looks again)."""
     if importlib.util.find_spec(ASSETS_PACKAGE) is not None:
         root = importlib.resources.files(ASSETS_PACKAGE)
         if isinstance(root, Path):
@@ -111,6 +111,12 @@ def _file(relative: str) -> Optional[Path]:
     if loc.root is not None:
         path = loc.root / relative
         return path if path.is_file() else None
+    return _extracted_file(relative)
+
+
+@functools.lru_cache(maxsize=None)
+def _extracted_file(relative: str) -> Optional[Path]:
+    """``relative`` copied out of a package that is not a plain folder (once per process), or None."""
     resource = importlib.resources.files(ASSETS_PACKAGE).joinpath(*relative.split("/"))
     return _as_path(resource) if resource.is_file() else None
 
@@ -145,7 +151,8 @@ def model_path(name: str = DEFAULT_MODEL_NAME) -> Path:
         if where.root is not None:
             looked = f"looked in {where.root / 'model'}"
         else:
-            looked = f"{ASSETS_PACKAGE} is not installed" if where.how == MISSING else f"looked in {ASSETS_PACKAGE}/model"
+            looked = (f"{ASSETS_PACKAGE} is not installed" if where.how == MISSING
+                      else f"looked in {ASSETS_PACKAGE}/model")
         raise InputError(name, f"the shipped model {name!r} is missing from this install ({looked}); "
                                "reinstall stylize3d, or give the path of a checkpoint (.safetensors)")
     return path

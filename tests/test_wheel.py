@@ -116,7 +116,8 @@ def test_installed_packages_come_from_the_fresh_venv_not_the_checkout(built):
         f"mods = {{n: importlib.import_module(n).__file__ for n in {OUR_PACKAGES!r}}}\n"
         "from app.viewer.session import DEFAULT_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE\n"
         "viewer = {k: str(v) for k, v in dict(model=DEFAULT_MODEL, photo=SAMPLE_PHOTO, style=SAMPLE_STYLE).items()}\n"
-        "print(json.dumps({'modules': mods, 'viewer': viewer, 'dist': str(md.distribution('stylize3d').locate_file('stylize3d_core')),\n"
+        "dist = str(md.distribution('stylize3d').locate_file('stylize3d_core'))\n"
+        "print(json.dumps({'modules': mods, 'viewer': viewer, 'dist': dist,\n"
         "                  'editable_finder': [m for m in sys.modules if 'editable' in m]}))\n"
     )
     out = json.loads(_run([built["bin"] / "python", "-c", code], built["cwd"], built["env"]).stdout)

@@ -91,7 +91,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     app = gui.Application.instance
     app.initialize()
     viewer = ViewerWindow(ViewerOptions(
-        photo=args.photo, style=args.style, depth=args.depth, refine_depth=args.refine_depth, model=model, use_model=not args.no_model,
+        photo=args.photo, style=args.style, depth=args.depth, refine_depth=args.refine_depth, model=model,
+        use_model=not args.no_model,
         max_size=args.max_size,
         fov=args.fov, strength=args.strength, width=width, height=height))
     runner = None
