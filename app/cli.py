@@ -70,12 +70,32 @@ def _add_training(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--seed", type=int, default=d.seed)
 
 
+def _add_info(sub: "argparse._SubParsersAction") -> None:
+    p = sub.add_parser("info", help="versions, threads, where the model and samples are, display and GPU "
+                                    "(paste it into a bug report)")
+    p.add_argument("--json", action="store_true", help="print the report as JSON")
+
+
 def build_parser() -> argparse.ArgumentParser:
+    from stylize3d_core import __version__
+
     parser = argparse.ArgumentParser(prog=PROG, description="Stylized 3D photos from one photo.")
+    parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _add_render(sub)
     _add_training(sub)
+    _add_info(sub)
     return parser
+
+
+def _info(args: argparse.Namespace) -> int:
+    import json
+
+    from stylize3d_core.info import collect, format_report
+
+    report = collect()
+    print(json.dumps(report, indent=2) if args.json else format_report(report))
+    return 0
 
 
 def _prepare_data(args: argparse.Namespace) -> int:
@@ -130,7 +150,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         handlers = {"render": _render, "prepare-data": _prepare_data, "prepare-styles": _prepare_styles,
-                    "train": _train}
+                    "train": _train, "info": _info}
         return handlers[args.command](args)
     except InputError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)

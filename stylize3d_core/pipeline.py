@@ -24,13 +24,15 @@ from .io.ply import write_ply
 from .io.video import MAX_GIF_FPS, Progress, video_kind, write_video
 from .options import check_options, documented, option
 from .render.plain import PlainRenderer, PlainRenderSettings, frame_size
+from .resources import DEFAULT_MODEL_NAME, default_model, resolve_model
 from .scene.ldi import LDISettings
 from .scene.photo3d import Photo3D, Photo3DSettings
 
 Log = Callable[[str], None]
 
-DEFAULT_MODEL = str(Path(__file__).resolve().parents[1] / "assets" / "model" / "stylize3d_lite.safetensors")
-"""The trained lite checkpoint shipped with the repository (see assets/model/README.md)."""
+DEFAULT_MODEL = default_model()
+"""The shipped trained lite checkpoint's path in this install (``stylize3d_core.resources``; its
+provenance is ``model/README.md`` beside it)."""
 
 
 def _quiet(_: str) -> None:
@@ -101,8 +103,9 @@ class RenderJob:
     style: Optional[str] = option(None, metavar="IMAGE", default_text="none: the plain 3D photo",
                                   help="style image (a painting, a texture).")
     strength: float = option(0.8, low=0.0, high=1.0, help="style strength from 0 (photo) to 1.")
-    model: str = option(DEFAULT_MODEL, metavar="CHECKPOINT", default_text="the shipped lite model",
-                        help="the stylization model checkpoint used with style.")
+    model: str = option(DEFAULT_MODEL_NAME, metavar="MODEL",
+                        help="the stylization model used with style: a shipped model's name (lite) or a "
+                             "checkpoint you trained (.safetensors).")
 
     def __post_init__(self) -> None:
         check_options(self)
@@ -211,25 +214,24 @@ def job_cameras(job: RenderJob, fov_y_deg: float, loaded: Optional[CameraPath] =
 
 
 def _check_style_inputs(job: RenderJob):
-    """Fail fast, before the photo is processed: the style image, the strength and the model file."""
+    """Fail fast, before the photo is processed: the style image, the strength and the model
+    (a shipped model's name or a checkpoint path, resolved to the checkpoint's path)."""
     from .stylize import StylizeSettings
 
     settings = StylizeSettings(strength=job.strength, supersample=job.supersample)
     style = load_image(job.style, max_size=1024).rgb
-    if not Path(job.model).exists():
-        raise InputError(job.model, "model checkpoint not found (train one with `stylize3d train`, or pass --model)")
-    return settings, style
+    return settings, style, resolve_model(job.model)
 
 
-def _stylized(p3d: Photo3D, job: RenderJob, settings, style, timings: Dict[str, float], log: Log):
+def _stylized(p3d: Photo3D, job: RenderJob, settings, style, model: str, timings: Dict[str, float], log: Log):
     from .models.checkpoint import load_checkpoint
     from .stylize import Stylized3DPhoto
 
     t0 = time.perf_counter()
-    stylized = Stylized3DPhoto(p3d, load_checkpoint(job.model), settings)
+    stylized = Stylized3DPhoto(p3d, load_checkpoint(model), settings)
     stylized.set_style(style)
     timings["model"] = time.perf_counter() - t0
-    log(f"style {job.style} at strength {job.strength:g} with {job.model}")
+    log(f"style {job.style} at strength {job.strength:g} with {model}")
     return stylized
 
 

@@ -16,6 +16,7 @@ LAYERS: Tuple[Tuple[str, ...], ...] = (
     ("errors",),
     ("checks",),
     ("options",),
+    ("resources",),
     ("geometry",),
     ("io",),
     ("depth",),
@@ -25,11 +26,13 @@ LAYERS: Tuple[Tuple[str, ...], ...] = (
     ("train", "stylize"),
     ("eval", "pipeline"),
     ("stylize3d_core",),
+    ("info",),
 )
 """The package order of ``stylize3d_core``, bottom first; the viewer and the CLI (``app/``) sit above it all.
 
 Each name is a package (``io``) or a top-level module (``errors.py``); ``stylize3d_core`` is the
-package's own ``__init__.py``, which may re-export anything. A module may import from its own
+package's own ``__init__.py``, which may re-export anything; ``info`` (the ``stylize3d info``
+report, which reads the package version) sits above it. A module may import from its own
 package and from lower layers only: never from a higher layer, nor from another package of its
 own layer (``render`` and ``points``, ``train`` and ``stylize``, ``eval`` and ``pipeline`` are
 independent of each other). Imports inside functions count as well.

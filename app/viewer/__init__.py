@@ -25,6 +25,7 @@ from typing import List, Optional
 
 from stylize3d_core.errors import InputError
 from stylize3d_core.pipeline import PhotoSpec
+from stylize3d_core.resources import resolve_model
 
 from ..options import add_options, from_args
 from .session import DEFAULT_MODEL
@@ -42,8 +43,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--style", default=None, help="style image to apply")
     models = p.add_mutually_exclusive_group()
     models.add_argument("--model", default=None, metavar="CHECKPOINT",
-                        help=f"model checkpoint (.safetensors); default {DEFAULT_MODEL.relative_to(DEFAULT_MODEL.parents[2])} "
-                             "when it exists, else the plain 3D photo is shown")
+                        help="model: a shipped model's name (lite) or a checkpoint (.safetensors); default: "
+                             f"the shipped lite model ({DEFAULT_MODEL}) when it is installed, else the plain "
+                             "3D photo is shown")
     models.add_argument("--no-model", action="store_true",
                         help="show the plain 3D photo even if a model is available")
     p.add_argument("--strength", type=float, default=0.8, help="style strength in [0, 1] (default 0.8)")
@@ -75,6 +77,13 @@ def main(argv: Optional[List[str]] = None) -> int:
     if args.threads < 1:
         print(f"{PROG}: --threads must be >= 1, got {args.threads}", file=sys.stderr)
         return 2
+    model = args.model
+    if model is not None:
+        try:
+            model = resolve_model(model)  # a name ("lite") or a path
+        except InputError as e:
+            print(f"{PROG}: error: {e}", file=sys.stderr)
+            return 2
     import open3d.visualization.gui as gui
     import torch
 
@@ -86,7 +95,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     steps = read_script(args.test_script) if args.test_script else None
     app = gui.Application.instance
     app.initialize()
-    viewer = ViewerWindow(ViewerOptions(spec=spec, style=args.style, model=args.model, use_model=not args.no_model,
+    viewer = ViewerWindow(ViewerOptions(spec=spec, style=args.style, model=model, use_model=not args.no_model,
                                         strength=args.strength, width=width, height=height))
     runner = None
     if steps is not None:

@@ -10,9 +10,9 @@ renders. It keeps everything that does not depend on the camera:
   holding the encoded point cloud: a new style re-uses it (no re-encoding), a
   new strength only re-blends.
 
-Without a checkpoint (none given, the shipped ``assets/model/stylize3d_lite.safetensors``
-missing, or ``use_model=False``) the session renders the plain 3D photo and says
-so (:data:`NO_MODEL`).
+Without a checkpoint (none given, the shipped lite model missing from the install,
+or ``use_model=False``) the session renders the plain 3D photo and says so
+(:data:`NO_MODEL`).
 
 Everything that fails keeps what was there before: a photo that cannot be read
 leaves the current photo loaded, a style that cannot be read the current style.
@@ -28,6 +28,7 @@ from typing import Callable, NamedTuple, Optional, Tuple
 import cv2
 import numpy as np
 
+from stylize3d_core import resources
 from stylize3d_core.errors import InputError
 from stylize3d_core.geometry.camera import Cameras
 from stylize3d_core.io.images import load_image, to_uint8
@@ -39,11 +40,10 @@ from stylize3d_core.scene.photo3d import Photo3D
 from .orbit import OrbitScene
 from .state import PhotoInfo
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
-DEFAULT_MODEL = REPO_ROOT / "assets" / "model" / "stylize3d_lite.safetensors"
-"""The shipped trained checkpoint."""
-SAMPLE_PHOTO = REPO_ROOT / "assets" / "samples" / "coffee.jpg"
-SAMPLE_STYLE = REPO_ROOT / "assets" / "styles" / "painting_style19_chelsea.jpg"
+DEFAULT_MODEL = resources.shipped_location(resources.MODELS[resources.DEFAULT_MODEL_NAME])
+"""The shipped trained checkpoint (found by ``stylize3d_core.resources``; may be missing from an install)."""
+SAMPLE_PHOTO = resources.shipped_location(f"samples/{resources.SAMPLE_PHOTO_NAME}")
+SAMPLE_STYLE = resources.shipped_location(f"styles/{resources.SAMPLE_STYLE_NAME}")
 NO_MODEL = "no trained model: showing the plain 3D photo"
 STYLE_MAX_SIZE = 512
 """Style images are read with their long side shrunk to this (the style encoder's own cap)."""
