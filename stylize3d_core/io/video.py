@@ -18,7 +18,10 @@ The format comes from the destination path:
 
 Every write is atomic (:func:`stylize3d_core.io.atomic.atomic_path`): frames go
 to a temporary file or folder beside the destination, renamed into place only
-when the last frame is written. If the frame iterator or the progress callback
+when the last frame is written and the output reads back complete (MP4: ffmpeg
+reads it back with the frame count and size written; GIF: every frame decodes;
+PNG: every frame file verifies). A full disk, a file-size limit or a failing
+encoder is an :class:`ExportError`; the old destination is untouched. If the frame iterator or the progress callback
 raises -- a Cancel button raises :class:`ExportCancelled` from the callback --
 the temporary output is removed and an existing destination is untouched.
 """
@@ -29,13 +32,13 @@ import math
 import os
 import re
 from pathlib import Path
-from typing import Callable, Iterable, Iterator, Literal, Optional
+from typing import Callable, Iterable, Iterator, Literal, Optional, Tuple
 
 import numpy as np
 from PIL import Image
 
 from ..errors import ExportError, InputError, PathLike, Stylize3DError
-from .atomic import atomic_path
+from .atomic import atomic_path, describe_os_error
 from .images import rgb_to_uint8
 
 Progress = Callable[[int, Optional[int]], None]
@@ -138,6 +141,91 @@ def _pad_even(frame: np.ndarray) -> np.ndarray:
     if h % 2 == 0 and w % 2 == 0:
         return frame
     return np.pad(frame, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge")  # (H', W', 3)
+
+
+def _probe_mp4(path: Path) -> Tuple[int, Optional[Tuple[int, int]]]:
+    """(frame count, (width, height)) of an MP4, read back by ffmpeg (packets copied, not decoded).
+
+    Raises ExportError with ffmpeg's own words when the file does not read back.
+    """
+    import subprocess
+
+    import imageio_ffmpeg
+
+    cmd = [imageio_ffmpeg.get_ffmpeg_exe(), "-nostdin", "-hide_banner", "-i", str(path),
+           "-map", "0:v:0", "-c", "copy", "-f", "null", "-"]
+    try:
+        run = subprocess.run(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                             timeout=600)
+    except (OSError, subprocess.SubprocessError) as e:
+        raise ExportError(f"could not run ffmpeg to check the written video: {e}") from e
+    err = run.stderr.decode("utf-8", "replace")
+    frames = re.findall(r"frame=\s*(\d+)", err)
+    size = re.search(r"Video: .*?, (\d{2,5})x(\d{2,5})", err)
+    if run.returncode != 0 or not frames:
+        lines = [ln.strip() for ln in err.splitlines() if ln.strip() and not ln.startswith(" ")]
+        raise ExportError(f"ffmpeg cannot read it back ({lines[-1] if lines else f'exit status {run.returncode}'})")
+    return int(frames[-1]), (int(size.group(1)), int(size.group(2))) if size else None
+
+
+def _verify_mp4(dest: Path, source: "_FrameSource") -> Callable[[Path], None]:
+    def verify(tmp: Path) -> None:
+        h, w = source.size
+        want = (w + w % 2, h + h % 2)
+        try:
+            count, size = _probe_mp4(tmp)
+        except ExportError as e:
+            raise ExportError(f"{dest}: the written video is incomplete: {e}{_free_hint(dest)}") from None
+        if count != source.count or size != want:
+            raise ExportError(f"{dest}: the written video is incomplete: it reads back as {count} frames of "
+                              f"{size}, {source.count} frames of {want} were written{_free_hint(dest)}")
+    return verify
+
+
+def _free_hint(dest: Path) -> str:
+    """'; the disk is full (N bytes free)' when the destination's disk is (nearly) full, else ''."""
+    import shutil
+
+    try:
+        free = shutil.disk_usage(dest.parent if str(dest.parent) else ".").free
+    except OSError:
+        return ""
+    return f"; the disk is full ({free:,} bytes free)" if free < 1024 * 1024 else ""
+
+
+def _verify_gif(dest: Path, source: "_FrameSource") -> Callable[[Path], None]:
+    def verify(tmp: Path) -> None:
+        h, w = source.size
+        try:
+            with Image.open(tmp) as im:
+                n = getattr(im, "n_frames", 1)
+                ok = im.format == "GIF" and im.size == (w, h) and 1 <= n <= source.count
+                for i in range(n):  # every frame decodes (a truncated GIF fails here)
+                    im.seek(i)
+                    im.load()
+        except Exception as e:  # Pillow raises many types for a truncated file
+            raise ExportError(f"{dest}: the written GIF does not read back ({e}){_free_hint(dest)}") from None
+        if not ok:
+            raise ExportError(f"{dest}: the written GIF is incomplete ({n} frames of {im.size}){_free_hint(dest)}")
+    return verify
+
+
+def _verify_png_folder(dest: Path, source: "_FrameSource") -> Callable[[Path], None]:
+    def verify(tmp: Path) -> None:
+        h, w = source.size
+        names = sorted(p.name for p in tmp.iterdir())
+        if names != [FRAME_NAME.format(i) for i in range(source.count)]:
+            raise ExportError(f"{dest}: the frames folder is incomplete ({len(names)} of {source.count} files)")
+        for name in names:
+            try:
+                with Image.open(tmp / name) as im:
+                    size = im.size
+                    im.verify()
+            except Exception as e:
+                raise ExportError(f"{dest}: frame {name} does not read back ({e}){_free_hint(dest)}") from None
+            if size != (w, h):
+                raise ExportError(f"{dest}: frame {name} reads back as {size}, not {(w, h)}")
+    return verify
 
 
 def _write_mp4(tmp: Path, source: _FrameSource, fps: float, quality: float) -> None:
@@ -248,7 +336,8 @@ def write_video(
         _check_frames_folder(dest)
     source = _FrameSource(frames, None if n_frames is None else int(n_frames), progress)
     try:
-        with atomic_path(dest, directory=(kind == "png")) as tmp:
+        verify = {"mp4": _verify_mp4, "gif": _verify_gif, "png": _verify_png_folder}[kind](dest, source)
+        with atomic_path(dest, directory=(kind == "png"), verify=verify) as tmp:
             if kind == "mp4":
                 _write_mp4(tmp, source, fps_v, q)
             elif kind == "gif":
@@ -258,7 +347,7 @@ def write_video(
     except (OSError, RuntimeError, ValueError) as e:
         if source.failed or isinstance(e, Stylize3DError):
             raise
-        raise ExportError(f"{dest}: could not write the {kind.upper()} output: {e}") from e
+        raise ExportError(f"{dest}: could not write the {kind.upper()} output: {describe_os_error(e)}") from e
     return dest
 
 
