@@ -177,10 +177,14 @@ def save_camera_path(
 
 MAX_FRAMES = 10_000
 """Most frames a camera-path file may hold by default (5.5 min at 30 fps); ``max_frames`` raises it."""
-MAX_FILE_BYTES = 64 * 1024 * 1024
-"""Largest camera-path file read (a 10,000-frame path written by :func:`save_camera_path` is ~5 MB)."""
+MAX_FILE_BYTES = 32 * 1024 * 1024
+"""Largest camera-path file read (a 10,000-frame path written by :func:`save_camera_path` is ~6 MB)."""
 MAX_JSON_DEPTH = 32
 """Deepest nesting of arrays and objects accepted (the schema needs 4)."""
+_MAYBE_HUGE = re.compile(rb"[0-9]{309}|[eE][+-]?[0-9]{3}")
+_BRACKET_STEP = np.zeros(256, np.int8)
+_BRACKET_STEP[[ord("["), ord("{")]] = 1
+_BRACKET_STEP[[ord("]"), ord("}")]] = -1
 _STRING = re.compile(rb'"(?:[^"\\]|\\.)*"', re.DOTALL)
 
 
@@ -206,10 +210,10 @@ def _parse_float(text: str) -> float:
 
 def _json_depth(data: bytes) -> int:
     """Deepest bracket nesting of JSON text (brackets inside strings do not count)."""
-    bare = np.frombuffer(_STRING.sub(b'""', data), dtype=np.uint8)
-    step = (np.isin(bare, (ord("["), ord("{"))).astype(np.int64)
-            - np.isin(bare, (ord("]"), ord("}"))).astype(np.int64))
-    return int(np.cumsum(step).max(initial=0))
+    bare = np.frombuffer(_STRING.sub(b'""', data) if b'"' in data else data, dtype=np.uint8)
+    step = _BRACKET_STEP[bare]  # +1 opening, -1 closing, 0 other bytes
+    step = step[step != 0]
+    return int(np.cumsum(step, dtype=np.int32).max(initial=0))
 
 
 def read_json_file(path: PathLike, what: str, *, max_bytes: int = MAX_FILE_BYTES,
@@ -239,8 +243,11 @@ def read_json_file(path: PathLike, what: str, *, max_bytes: int = MAX_FILE_BYTES
     depth = _json_depth(data)
     if depth > max_depth:
         raise InputError(src, f"not a valid JSON {what}: nested {depth} levels deep (at most {max_depth})")
+    # The number hooks cost a Python call per number: use them only where a number may not fit a float
+    # (a run of 309+ digits, or an exponent of 3+ digits).
+    hooks = {"parse_int": _parse_int, "parse_float": _parse_float} if _MAYBE_HUGE.search(data) else {}
     try:
-        return json.loads(text, parse_constant=_reject_constant, parse_int=_parse_int, parse_float=_parse_float)
+        return json.loads(text, parse_constant=_reject_constant, **hooks)
     except RecursionError:  # not reached below max_depth; kept as a guard
         raise InputError(src, f"not a valid JSON {what}: nested too deeply") from None
     except ValueError as e:  # JSONDecodeError is a ValueError; so are NaN/Infinity and oversized numbers
