@@ -374,9 +374,17 @@ def load_open3d_trajectory(path: PathLike, *, max_frames: int = MAX_FRAMES) -> C
     if not src.is_file():
         raise InputError(src, "file not found")
     doc = read_json_file(src, "camera trajectory")  # bounded before Open3D's own parser sees it
-    n = len(doc.get("parameters", [])) if isinstance(doc, dict) and isinstance(doc.get("parameters"), list) else 0
-    _check_frame_count(n, None, max_frames, src)
-    traj = o3io.read_pinhole_camera_trajectory(str(src))
+    params = doc.get("parameters") if isinstance(doc, dict) else None
+    if not params:
+        raise InputError(src, "not an Open3D PinholeCameraTrajectory, or it has zero frames")
+    if not isinstance(params, list) or not all(isinstance(p, dict) for p in params):
+        raise InputError(src, "not an Open3D PinholeCameraTrajectory (expected an object whose 'parameters' "
+                              "is a list of camera objects)")
+    _check_frame_count(len(params), None, max_frames, src)
+    try:
+        traj = o3io.read_pinhole_camera_trajectory(str(src))
+    except RuntimeError as e:  # Open3D's JSON reader: a value of the wrong type
+        raise InputError(src, f"not an Open3D PinholeCameraTrajectory ({e})") from None
     if len(traj.parameters) == 0:
         raise InputError(src, "not an Open3D PinholeCameraTrajectory, or it has zero frames")
     mats: List[np.ndarray] = []
