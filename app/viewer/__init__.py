@@ -84,6 +84,16 @@ def main(argv: Optional[List[str]] = None) -> int:
         photo=args.photo, style=args.style, depth=args.depth, refine_depth=args.refine_depth, model=args.model, use_model=not args.no_model,
         max_size=args.max_size,
         fov=args.fov, strength=args.strength, width=width, height=height))
+    import signal  # SIGINT / SIGTERM close the window like its close button (handled at the next GUI callback)
+
+    received: List[int] = []
+
+    def _close_on_signal(signum: int, _frame) -> None:
+        received.append(signum)
+        viewer.request_close()
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, _close_on_signal)
     runner = None
     if steps is not None:
         runner = ScriptRunner(viewer, steps, args.test_report or "viewer-test-report.json")
@@ -93,7 +103,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     if runner is not None:
         runner.thread.join(timeout=10.0)
         return 0 if runner.ok else 1
-    return 0
+    return 128 + received[0] if received else 0
 
 
 def entrypoint() -> None:

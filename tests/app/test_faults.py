@@ -273,3 +273,31 @@ def test_camera_path_over_the_frame_limit_is_refused(noise_photo, tmp_path, caps
     assert rc == 2
     assert f"{path}: the camera path has 10,001 frames (6.7 min at 25 fps), more than the limit of 10,000" in err
     assert not (tmp_path / "v.mp4").exists()
+
+
+# --- the viewer ----------------------------------------------------------------------------------
+
+@pytest.mark.gui
+@pytest.mark.slow
+@pytest.mark.skipif(shutil.which("Xvfb") is None, reason="Xvfb is not installed (the viewer needs an X server)")
+@pytest.mark.parametrize("sig", [signal.SIGTERM])
+def test_viewer_closes_on_a_signal_like_its_close_button(sig, noise_photo, tmp_path):
+    r, w = os.pipe()
+    xvfb = subprocess.Popen(["Xvfb", "-displayfd", str(w), "-screen", "0", "640x480x24", "-nolisten", "tcp"],
+                            pass_fds=(w,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    os.close(w)
+    try:
+        with os.fdopen(r) as fh:
+            display = fh.readline().strip()
+        assert display.isdigit(), "Xvfb did not start"
+        proc = subprocess.Popen([sys.executable, "-m", "app.viewer", str(noise_photo), "--no-model",
+                                 "--size", "640x480"], cwd=ROOT, env={**ENV, "DISPLAY": f":{display}"},
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        _wait_for(lambda: _handlers_installed(proc.pid), proc, "the viewer's signal handlers", limit=180)
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=120)
+        assert proc.returncode == 128 + sig, err
+        assert "Traceback" not in err, err
+    finally:
+        xvfb.kill()
+        xvfb.wait()
