@@ -3,7 +3,7 @@
     python tests/fuzz/run_fuzz.py TARGET [libFuzzer options] NEW_CORPUS_DIR tests/fuzz/corpus/TARGET
 
 CI runs each target for a short budget (``test_fuzz.py``, STYLIZE3D_FUZZ_SECONDS,
-default 12 s). For a longer local run, e.g. ten minutes a target::
+default 8 s). For a longer local run, e.g. ten minutes a target::
 
     mkdir -p /tmp/fz && python tests/fuzz/run_fuzz.py camera_path -max_total_time=600 \\
         -max_len=16384 /tmp/fz tests/fuzz/corpus/camera_path

@@ -1,6 +1,6 @@
 """Fuzzing the parsers of user files (targets.py): a bounded atheris run per target, and replays.
 
-The atheris runs are short in CI (STYLIZE3D_FUZZ_SECONDS, default 12 s per target);
+The atheris runs are short in CI (STYLIZE3D_FUZZ_SECONDS, default 8 s per target);
 run_fuzz.py documents a longer local run. The committed corpus and every crash
 found so far (tests/fuzz/crashes/TARGET/) are replayed without atheris.
 """
@@ -20,7 +20,7 @@ sys.path.insert(0, str(HERE))
 
 import targets  # noqa: E402
 
-BUDGET_S = int(os.environ.get("STYLIZE3D_FUZZ_SECONDS", "12"))
+BUDGET_S = int(os.environ.get("STYLIZE3D_FUZZ_SECONDS", "8"))
 
 
 def _inputs(kind: str):
