@@ -28,11 +28,14 @@ the temporary output is removed and an existing destination is untouched.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import re
+import sys
+import tempfile
 from pathlib import Path
-from typing import Callable, Iterable, Iterator, Literal, Optional, Tuple
+from typing import IO, Callable, Iterable, Iterator, Literal, Optional, Tuple
 
 import numpy as np
 from PIL import Image
@@ -48,6 +51,7 @@ VideoKind = Literal["mp4", "gif", "png"]
 SUPPORTED = ".mp4, .gif, or a folder (path ending in '/' or without a suffix) for PNG frames"
 FRAME_NAME = "frame_{:04d}.png"
 _FRAME_RE = re.compile(r"^frame_\d{4,}\.png$")
+_FFMPEG_PREFIX = re.compile(r"^\[[^]]*\]\s*")  # "[out#0/mp4 @ 0x55...] " before an ffmpeg message
 MAX_GIF_FPS = 50.0
 GIF_PALETTE_SAMPLES = 128 * 128
 """Pixels sampled per frame to build its GIF palette (see ``_gif_frame``)."""
@@ -168,17 +172,19 @@ def _probe_mp4(path: Path) -> Tuple[int, Optional[Tuple[int, int]]]:
     return int(frames[-1]), (int(size.group(1)), int(size.group(2))) if size else None
 
 
-def _verify_mp4(dest: Path, source: "_FrameSource") -> Callable[[Path], None]:
+def _verify_mp4(dest: Path, source: "_FrameSource", log: Optional[IO[bytes]] = None) -> Callable[[Path], None]:
     def verify(tmp: Path) -> None:
         h, w = source.size
         want = (w + w % 2, h + h % 2)
         try:
             count, size = _probe_mp4(tmp)
         except ExportError as e:
-            raise ExportError(f"{dest}: the written video is incomplete: {e}{_free_hint(dest)}") from None
+            raise ExportError(f"{dest}: the written video is incomplete{_ffmpeg_said(log)}: {e}"
+                              f"{_free_hint(dest)}") from None
         if count != source.count or size != want:
-            raise ExportError(f"{dest}: the written video is incomplete: it reads back as {count} frames of "
-                              f"{size}, {source.count} frames of {want} were written{_free_hint(dest)}")
+            raise ExportError(f"{dest}: the written video is incomplete{_ffmpeg_said(log)}: it reads back as "
+                              f"{count} frames of {size}, {source.count} frames of {want} were written"
+                              f"{_free_hint(dest)}")
     return verify
 
 
@@ -228,7 +234,8 @@ def _verify_png_folder(dest: Path, source: "_FrameSource") -> Callable[[Path], N
     return verify
 
 
-def _write_mp4(tmp: Path, source: _FrameSource, fps: float, quality: float) -> None:
+def _write_mp4(tmp: Path, source: _FrameSource, fps: float, quality: float, log: Optional[IO[bytes]] = None) -> None:
+    """Encode with ffmpeg; its error messages go to ``log`` (read by the check) instead of the console."""
     import imageio.v2 as iio  # lazy: imageio's plugin registry is slow to import
 
     writer = iio.get_writer(
@@ -237,10 +244,38 @@ def _write_mp4(tmp: Path, source: _FrameSource, fps: float, quality: float) -> N
         output_params=["-movflags", "+faststart"],
     )
     try:
-        for frame in source:
-            writer.append_data(_pad_even(frame))
+        for i, frame in enumerate(source):
+            if i == 0 and log is not None:
+                with _stderr_to(log):  # the first frame starts ffmpeg, which inherits this stderr
+                    writer.append_data(_pad_even(frame))
+            else:
+                writer.append_data(_pad_even(frame))
     finally:
         writer.close()
+
+
+@contextlib.contextmanager
+def _stderr_to(log: IO[bytes]) -> Iterator[None]:
+    """Point file descriptor 2 at ``log`` while a child process starts (it keeps the file)."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        os.dup2(log.fileno(), 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
+def _ffmpeg_said(log: Optional[IO[bytes]]) -> str:
+    """' (ffmpeg: <its last error line>)' from ffmpeg's captured stderr, or ''."""
+    if log is None:
+        return ""
+    log.seek(0)
+    lines = [ln.strip() for ln in log.read().decode("utf-8", "replace").splitlines() if ln.strip()]
+    if not lines:
+        return ""
+    return f" (ffmpeg: {_FFMPEG_PREFIX.sub('', lines[-1])[:200]})"
 
 
 def _gif_frame(frame: np.ndarray) -> Image.Image:
@@ -335,11 +370,13 @@ def write_video(
     if kind == "png":
         _check_frames_folder(dest)
     source = _FrameSource(frames, None if n_frames is None else int(n_frames), progress)
+    log = tempfile.TemporaryFile() if kind == "mp4" else None  # ffmpeg's stderr
     try:
-        verify = {"mp4": _verify_mp4, "gif": _verify_gif, "png": _verify_png_folder}[kind](dest, source)
+        verify = _verify_mp4(dest, source, log) if kind == "mp4" else \
+            {"gif": _verify_gif, "png": _verify_png_folder}[kind](dest, source)
         with atomic_path(dest, directory=(kind == "png"), verify=verify) as tmp:
             if kind == "mp4":
-                _write_mp4(tmp, source, fps_v, q)
+                _write_mp4(tmp, source, fps_v, q, log)
             elif kind == "gif":
                 _write_gif(tmp, source, fps_v)
             else:
@@ -347,7 +384,11 @@ def write_video(
     except (OSError, RuntimeError, ValueError) as e:
         if source.failed or isinstance(e, Stylize3DError):
             raise
-        raise ExportError(f"{dest}: could not write the {kind.upper()} output: {describe_os_error(e)}") from e
+        raise ExportError(f"{dest}: could not write the {kind.upper()} output: {describe_os_error(e)}"
+                          f"{_ffmpeg_said(log)}") from e
+    finally:
+        if log is not None:
+            log.close()
     return dest
 
 

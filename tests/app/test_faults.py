@@ -75,6 +75,7 @@ def test_full_disk_keeps_every_previous_output(noise_photo, tmp_path):
     for name in ("ply", "json"):  # their size is known: refused before anything is written
         assert "not enough free space" in report[name]["stderr"]
     assert "the written video is incomplete" in report["mp4"]["stderr"]  # ffmpeg's failure is no longer success
+    assert "(ffmpeg: Error" in report["mp4"]["stderr"] and "No space left on device" in report["mp4"]["stderr"]
 
 
 @pytest.mark.slow
