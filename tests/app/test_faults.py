@@ -153,8 +153,8 @@ def test_signal_during_export_keeps_the_old_output(kind, sig, noise_photo, tmp_p
     else:
         out.write_bytes(b"old video bytes")
     before = {p.name: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
-    # GIFs hold their frames in memory: keep that run small; the others run long enough to be caught writing.
-    n = "40" if kind == "v.gif" else "3000"
+    # Long enough to be caught writing (GIFs hold their frames in memory: fewer of them).
+    n = "300" if kind == "v.gif" else "3000"
     proc = _spawn(["render", str(noise_photo), "--frames", n, "--size", "64", "-o", str(tmp_path / kind), "-q"],
                   tmp_path)
     _wait_for(lambda: any(".partial" in p.name for p in tmp_path.iterdir()), proc, "the temporary output")
