@@ -199,12 +199,6 @@ def _internal_error(e: BaseException, args: argparse.Namespace) -> int:
     return INTERNAL_ERROR
 
 
-def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
-    """Library warnings as one clean line (no source file or line)."""
-    text = " ".join(str(message).split())
-    print(f"{PROG}: warning: {text}", file=sys.stderr if file is None else file)
-
-
 def main(argv: Optional[List[str]] = None) -> int:
     """Run the command line with ``argv`` (default ``sys.argv[1:]``); return the exit status.
 
@@ -214,10 +208,10 @@ def main(argv: Optional[List[str]] = None) -> int:
     """
     import warnings
 
-    from app.entry import interrupted_message, interrupted_status
+    from app.entry import interrupted_message, interrupted_status, show_warning
 
     args = build_parser().parse_args(argv)
-    shown, warnings.showwarning = warnings.showwarning, _show_warning
+    shown, warnings.showwarning = warnings.showwarning, show_warning
     try:
         handlers = {"render": _render, "prepare-data": _prepare_data, "prepare-styles": _prepare_styles,
                     "train": _train}

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import signal
 import sys
+import warnings
 from typing import List, Optional
 
 PROG = "stylize3d"
@@ -54,9 +55,19 @@ def interrupted_message(e: BaseException) -> str:
     return "interrupted" if name == "SIGINT" else f"terminated ({name})"
 
 
+def show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A ``warnings.showwarning`` that prints one clean line (no category, source file or line)."""
+    text = " ".join(str(message).split())
+    print(f"{PROG}: warning: {text}", file=sys.stderr if file is None else file)
+
+
 def run(argv: Optional[List[str]] = None) -> int:
-    """Install the signal handlers, then import and run :func:`app.cli.main`; return the exit status."""
+    """Install the signal handlers, then import and run :func:`app.cli.main`; return the exit status.
+
+    Warnings raised while the libraries import are shown as one line too.
+    """
     install_signal_handlers()
+    warnings.showwarning = show_warning
     try:
         from app.cli import main  # lazy: imports torch
 

@@ -302,3 +302,26 @@ def test_viewer_closes_on_a_signal_like_its_close_button(sig, noise_photo, tmp_p
     finally:
         xvfb.kill()
         xvfb.wait()
+
+
+def test_the_console_script_is_the_signal_safe_entry_point():
+    import tomllib
+
+    scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+    assert scripts["stylize3d"] == "app.entry:entrypoint"
+
+
+def test_warnings_while_importing_are_one_line_too(capsys, monkeypatch):
+    import warnings
+
+    monkeypatch.setattr(warnings, "showwarning", warnings.showwarning)
+    monkeypatch.setattr(entry, "install_signal_handlers", lambda: None)  # keep pytest's own handlers
+    import app.cli
+
+    def warn_then_fail(argv):
+        warnings.warn("something odd\n  in two lines", RuntimeWarning)
+        return 0
+
+    monkeypatch.setattr(app.cli, "main", warn_then_fail)
+    assert entry.run([]) == 0
+    assert capsys.readouterr().err == "stylize3d: warning: something odd in two lines\n"
