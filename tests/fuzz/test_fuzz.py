@@ -79,7 +79,8 @@ def test_fuzz_target(target, tmp_path):
     cmd = [sys.executable, str(HERE / "run_fuzz.py"), target, f"-max_total_time={BUDGET_S}",
            f"-max_len={targets.MAX_LEN}", "-timeout=20", "-rss_limit_mb=3072", f"-artifact_prefix={tmp_path}/",
            str(new), str(HERE / "corpus" / target)]
-    run = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=BUDGET_S + 240)
+    env = {**os.environ, "TMPDIR": str(tmp_path)}  # libFuzzer exits without atexit: its files stay in tmp_path
+    run = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=BUDGET_S + 240)
     crashes = sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(("crash-", "timeout-", "oom-")))
     assert run.returncode == 0 and not crashes, f"{crashes}\n{run.stderr[-4000:]}"
     assert "Done" in run.stderr  # libFuzzer finished its budget
