@@ -4,7 +4,9 @@
                            [--fps 30] [--size 512] [-o out.mp4] [--save-ply FILE]
 
 Exit status: 0 on success, 2 for bad input (the message names the file or the
-setting), 1 when an output could not be written, 130 when interrupted.
+setting), 1 when an output could not be written, 3 for an unexpected internal
+error (one line; the traceback is saved to a file), 130 when interrupted (143 on
+SIGTERM). Start it through :mod:`app.entry`, which handles signals from the first line.
 """
 
 from __future__ import annotations
@@ -145,9 +147,52 @@ def _render(args: argparse.Namespace) -> int:
     return 0
 
 
+INTERNAL_ERROR = 3
+"""Exit status of an unexpected exception (a bug): the traceback goes to a file, see :func:`_internal_error`."""
+
+
+def _inputs(args: argparse.Namespace) -> str:
+    """The inputs a command was working on, for the last-resort error line."""
+    names = ("photo", "style", "camera_path", "depth", "data", "init", "out")
+    parts = [f"{n.replace('_', '-')} {getattr(args, n)}" for n in names if isinstance(getattr(args, n, None), str)]
+    return ", ".join(parts) or "no input file"
+
+
+def _internal_error(e: BaseException, args: argparse.Namespace) -> int:
+    """Save the traceback to a file and print one line naming the command, its inputs and the file."""
+    import os
+    import tempfile
+    import time
+    import traceback
+
+    what = " ".join(f"{type(e).__name__}: {e}".split())[:300]
+    folder = os.environ.get("STYLIZE3D_CRASH_DIR") or tempfile.gettempdir()
+    try:
+        fd, path = tempfile.mkstemp(prefix=f"{PROG}-crash-{time.strftime('%Y%m%d-%H%M%S')}-", suffix=".txt",
+                                    dir=folder)
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(f"{PROG} {args.command}: {_inputs(args)}\n\n" + traceback.format_exc())
+        saved = f"full traceback in {path}"
+    except OSError as err:
+        saved = f"the traceback could not be saved ({err.strerror or err})"
+    print(f"{PROG}: internal error in '{args.command}' working on {_inputs(args)}: {what}; {saved}",
+          file=sys.stderr)
+    return INTERNAL_ERROR
+
+
 def main(argv: Optional[List[str]] = None) -> int:
-    """Run the command line with ``argv`` (default ``sys.argv[1:]``); return the exit status."""
+    """Run the command line with ``argv`` (default ``sys.argv[1:]``); return the exit status.
+
+    0 success, 1 an output could not be written, 2 bad input, 3 an unexpected
+    internal error (traceback saved to a file), 128 + signal when interrupted
+    (130 Ctrl-C, 143 SIGTERM).
+    """
+    import warnings
+
+    from app.entry import interrupted_message, interrupted_status, show_warning
+
     args = build_parser().parse_args(argv)
+    shown, warnings.showwarning = warnings.showwarning, show_warning
     try:
         handlers = {"render": _render, "prepare-data": _prepare_data, "prepare-styles": _prepare_styles,
                     "train": _train, "info": _info}
@@ -161,17 +206,23 @@ def main(argv: Optional[List[str]] = None) -> int:
     except ExportError as e:
         print(f"{PROG}: could not write output: {e}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        print(f"{PROG}: interrupted; nothing was written", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as e:
+        print(f"{PROG}: {interrupted_message(e)}; nothing was written", file=sys.stderr)
+        return interrupted_status(e)
     except Stylize3DError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 1
+    except Exception as e:  # the last line of defence: a bug, reported in one line
+        return _internal_error(e, args)
+    finally:
+        warnings.showwarning = shown
 
 
 def entrypoint() -> None:
-    """Console-script entry point (see pyproject.toml)."""
-    sys.exit(main())
+    """Console-script entry point: the signal-safe :func:`app.entry.entrypoint`."""
+    from app.entry import entrypoint as safe_entrypoint
+
+    safe_entrypoint()
 
 
 if __name__ == "__main__":

@@ -224,11 +224,10 @@ def _check_style_inputs(job: RenderJob):
 
 
 def _stylized(p3d: Photo3D, job: RenderJob, settings, style, model: str, timings: Dict[str, float], log: Log):
-    from .models.checkpoint import load_checkpoint
     from .stylize import Stylized3DPhoto
 
     t0 = time.perf_counter()
-    stylized = Stylized3DPhoto(p3d, load_checkpoint(model), settings)
+    stylized = Stylized3DPhoto(p3d, model, settings)  # given the path, its errors name the checkpoint
     stylized.set_style(style)
     timings["model"] = time.perf_counter() - t0
     log(f"style {job.style} at strength {job.strength:g} with {model}")

@@ -90,6 +90,7 @@ class Stylized3DPhoto:
         style_encoder: Optional[StyleEncoder] = None,
     ) -> None:
         ck = checkpoint if isinstance(checkpoint, Checkpoint) else load_checkpoint(checkpoint)
+        self._checkpoint_name = "the model checkpoint" if isinstance(checkpoint, Checkpoint) else str(checkpoint)
         self.model: Stylize3DModel = ck.model.eval()
         self.stage = ck.stage
         self.settings = settings
@@ -158,6 +159,9 @@ class Stylized3DPhoto:
             else:
                 sparse = blend(self._content, self._stylized, self._strength)
             dense = self.model.dense_features(sparse, self._geom)  # (N, Cr)
+            if not torch.isfinite(dense.sum()) and not torch.isfinite(dense).all():
+                raise InputError(self._checkpoint_name, "its weights make NaN or infinite features on this photo "
+                                 "(the weights are finite but far too large: a diverged or corrupt checkpoint)")
             self._dense = dense.index_select(0, self._order).contiguous()
         self.timings["upsample"] = time.perf_counter() - t0
 

@@ -97,6 +97,16 @@ def main(argv: Optional[List[str]] = None) -> int:
     app.initialize()
     viewer = ViewerWindow(ViewerOptions(spec=spec, style=args.style, model=model, use_model=not args.no_model,
                                         strength=args.strength, width=width, height=height))
+    import signal  # SIGINT / SIGTERM close the window like its close button (handled at the next GUI callback)
+
+    received: List[int] = []
+
+    def _close_on_signal(signum: int, _frame) -> None:
+        received.append(signum)
+        viewer.request_close()
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, _close_on_signal)
     runner = None
     if steps is not None:
         runner = ScriptRunner(viewer, steps, args.test_report or "viewer-test-report.json")
@@ -106,7 +116,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     if runner is not None:
         runner.thread.join(timeout=10.0)
         return 0 if runner.ok else 1
-    return 0
+    return 128 + received[0] if received else 0
 
 
 def entrypoint() -> None:

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, List, Optional, Tuple
@@ -42,7 +43,7 @@ import torch
 
 from ..errors import ExportError, InputError, PathLike
 from ..geometry.camera import MAX_FOV_DEG, MIN_FOV_DEG, Cameras, focal_from_fov
-from .atomic import atomic_path
+from .atomic import write_atomically
 
 FORMAT_TAG = "stylize3d-camera-path"
 FORMAT_VERSION = 1
@@ -88,9 +89,23 @@ def _check_image_size(image_size: Any, source: str) -> Optional[Tuple[int, int]]
 def _check_fps(fps: Any, source: str) -> float:
     if isinstance(fps, bool) or not isinstance(fps, (int, float, np.integer, np.floating)):
         raise InputError(source, f"fps must be a number, got {fps!r}")
-    if not (math.isfinite(float(fps)) and float(fps) > 0):
-        raise InputError(source, f"fps must be a finite number > 0, got {fps!r}")
-    return float(fps)
+    value = _as_float(fps)
+    if not (math.isfinite(value) and value > 0):
+        raise InputError(source, f"fps must be a finite number > 0, got {_short(fps)}")
+    return value
+
+
+def _as_float(v: Any) -> float:
+    """``float(v)``, or inf for an integer too large for a float (so range checks refuse it)."""
+    try:
+        return float(v)
+    except OverflowError:
+        return math.inf
+
+
+def _short(v: Any) -> str:
+    text = repr(v)
+    return text if len(text) <= 40 else f"{text[:20]}...({len(text)} characters)"
 
 
 def _rigid_problem(T: np.ndarray) -> Optional[str]:
@@ -109,9 +124,10 @@ def _rigid_problem(T: np.ndarray) -> Optional[str]:
 def _check_fov_value(fov: Any, where: str, source: str) -> float:
     if isinstance(fov, bool) or not isinstance(fov, (int, float)):
         raise InputError(source, f"{where}: fov_y_deg must be a number, got {fov!r}")
-    if not (math.isfinite(fov) and MIN_FOV_DEG <= fov <= MAX_FOV_DEG):
-        raise InputError(source, f"{where}: fov_y_deg must be in [{MIN_FOV_DEG:g}, {MAX_FOV_DEG:g}], got {fov!r}")
-    return float(fov)
+    value = _as_float(fov)
+    if not (math.isfinite(value) and MIN_FOV_DEG <= value <= MAX_FOV_DEG):
+        raise InputError(source, f"{where}: fov_y_deg must be in [{MIN_FOV_DEG:g}, {MAX_FOV_DEG:g}], got {_short(fov)}")
+    return value
 
 
 def _check_cameras(cameras: Any) -> Cameras:
@@ -150,39 +166,116 @@ def save_camera_path(
     }
     text = json.dumps(doc, indent=1, allow_nan=False)
     dest = Path(path)
-    try:
-        with atomic_path(dest) as tmp:
-            tmp.write_text(text, encoding="utf-8")
-    except ExportError:
-        raise
-    except OSError as e:
-        raise ExportError(f"{dest}: could not write the camera path: {e}") from e
-    return dest
+    data = text.encode("utf-8")
+
+    def verify(tmp: Path) -> None:
+        if tmp.read_bytes() != data:
+            raise ExportError(f"{dest}: the written camera path does not read back as written")
+
+    return write_atomically(dest, "camera path", lambda tmp: tmp.write_bytes(data), verify=verify, size=len(data))
+
+
+MAX_FRAMES = 10_000
+"""Most frames a camera-path file may hold by default (5.5 min at 30 fps); ``max_frames`` raises it."""
+MAX_FILE_BYTES = 32 * 1024 * 1024
+"""Largest camera-path file read (a 10,000-frame path written by :func:`save_camera_path` is ~6 MB)."""
+MAX_JSON_DEPTH = 32
+"""Deepest nesting of arrays and objects accepted (the schema needs 4)."""
+_MAYBE_HUGE = re.compile(rb"[0-9]{309}|[eE][+-]?[0-9]{3}")
+_BRACKET_STEP = np.zeros(256, np.int8)
+_BRACKET_STEP[[ord("["), ord("{")]] = 1
+_BRACKET_STEP[[ord("]"), ord("}")]] = -1
+_STRING = re.compile(rb'"(?:[^"\\]|\\.)*"', re.DOTALL)
 
 
 def _reject_constant(name: str) -> float:
     raise ValueError(f"non-finite number {name}")
 
 
-def load_camera_path(path: PathLike) -> CameraPath:
-    """Read a stylize3d camera-path JSON file.
+def _parse_int(text: str) -> int:
+    value = int(text)
+    try:
+        float(value)
+    except OverflowError:
+        raise ValueError(f"the integer {text[:20]}... ({len(text)} digits) does not fit a floating-point number")
+    return value
+
+
+def _parse_float(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"the number {text[:40]} does not fit a floating-point number")
+    return value
+
+
+def _json_depth(data: bytes) -> int:
+    """Deepest bracket nesting of JSON text (brackets inside strings do not count)."""
+    bare = np.frombuffer(_STRING.sub(b'""', data) if b'"' in data else data, dtype=np.uint8)
+    step = _BRACKET_STEP[bare]  # +1 opening, -1 closing, 0 other bytes
+    step = step[step != 0]
+    return int(np.cumsum(step, dtype=np.int32).max(initial=0))
+
+
+def read_json_file(path: PathLike, what: str, *, max_bytes: int = MAX_FILE_BYTES,
+                   max_depth: int = MAX_JSON_DEPTH) -> Any:
+    """Parse a user's JSON file with bounded size and nesting; numbers must fit a float64.
 
     Raises:
-        InputError: naming the file and the problem when it is missing, not JSON,
-            not a stylize3d camera path of a known version, or holds a bad frame
-            (wrong matrix shape, non-finite numbers, non-rigid pose, FOV out of range).
+        InputError: naming the file: missing, unreadable, too large, nested too
+            deeply, not JSON, or with NaN / Infinity / a number too large for a float.
     """
     src = Path(path)
     try:
-        text = src.read_text(encoding="utf-8")
+        size = src.stat().st_size
+        if size > max_bytes:
+            raise InputError(src, f"the file is {size:,} bytes, more than the {max_bytes:,} a {what} may have")
+        data = src.read_bytes()
     except FileNotFoundError:
         raise InputError(src, "file not found") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise InputError(src, f"cannot read the file: {e}") from None
+    except OSError as e:
+        raise InputError(src, f"cannot read the file: {e.strerror or e}") from None
+    if len(data) > max_bytes:  # grew while reading, or not a regular file
+        raise InputError(src, f"the file is more than the {max_bytes:,} bytes a {what} may have")
     try:
-        doc = json.loads(text, parse_constant=_reject_constant)
-    except ValueError as e:  # JSONDecodeError is a ValueError; so is NaN/Infinity
-        raise InputError(src, f"not a valid JSON camera path: {e}") from None
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise InputError(src, f"cannot read the file: not UTF-8 text ({e})") from None
+    depth = _json_depth(data)
+    if depth > max_depth:
+        raise InputError(src, f"not a valid JSON {what}: nested {depth} levels deep (at most {max_depth})")
+    # The number hooks cost a Python call per number: use them only where a number may not fit a float
+    # (a run of 309+ digits, or an exponent of 3+ digits).
+    hooks = {"parse_int": _parse_int, "parse_float": _parse_float} if _MAYBE_HUGE.search(data) else {}
+    try:
+        return json.loads(text, parse_constant=_reject_constant, **hooks)
+    except RecursionError:  # not reached below max_depth; kept as a guard
+        raise InputError(src, f"not a valid JSON {what}: nested too deeply") from None
+    except ValueError as e:  # JSONDecodeError is a ValueError; so are NaN/Infinity and oversized numbers
+        raise InputError(src, f"not a valid JSON {what}: {e}") from None
+
+
+def _check_frame_count(n: int, fps: Optional[float], max_frames: int, source: Path) -> None:
+    if n > max_frames:
+        length = f" ({n / fps / 60:.1f} min at {fps:g} fps)" if fps else ""
+        raise InputError(source, f"the camera path has {n:,} frames{length}, more than the limit of "
+                                 f"{max_frames:,}; split it, or raise the limit (max_frames)")
+
+
+def load_camera_path(path: PathLike, *, max_frames: int = MAX_FRAMES) -> CameraPath:
+    """Read a stylize3d camera-path JSON file.
+
+    Args:
+        path: the file.
+        max_frames: most frames accepted (default :data:`MAX_FRAMES`).
+    Raises:
+        InputError: naming the file and the problem when it is missing, too large,
+            not JSON (or nested too deeply, or with numbers that do not fit a float),
+            not a stylize3d camera path of a known version, has more than
+            ``max_frames`` frames, or holds a bad frame (wrong matrix shape,
+            non-finite numbers, non-rigid pose, FOV out of range).
+    """
+    src = Path(path)
+    doc = read_json_file(src, "camera path")
     if not isinstance(doc, dict) or doc.get("format") != FORMAT_TAG:
         got = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
         raise InputError(src, f"not a stylize3d camera path (expected \"format\": \"{FORMAT_TAG}\", got {got!r})")
@@ -196,6 +289,7 @@ def load_camera_path(path: PathLike) -> CameraPath:
     frames = doc["frames"]
     if not isinstance(frames, list) or len(frames) == 0:
         raise InputError(src, "'frames' must be a non-empty list (the path has zero frames)")
+    _check_frame_count(len(frames), fps, max_frames, src)
     mats: List[np.ndarray] = []
     fovs: List[float] = []
     for i, fr in enumerate(frames):
@@ -246,18 +340,23 @@ def save_open3d_trajectory(path: PathLike, cameras: Cameras, height: int, width:
         params.append(p)
     traj = o3c.PinholeCameraTrajectory()
     traj.parameters = params
-    try:
-        with atomic_path(dest) as tmp:
-            if not o3io.write_pinhole_camera_trajectory(str(tmp), traj):
-                raise ExportError(f"{dest}: Open3D could not write the camera trajectory")
-    except ExportError:
-        raise
-    except OSError as e:
-        raise ExportError(f"{dest}: could not write the camera trajectory: {e}") from e
-    return dest
+    def write(tmp: Path) -> None:
+        if not o3io.write_pinhole_camera_trajectory(str(tmp), traj):
+            raise ExportError(f"{dest}: Open3D could not write the camera trajectory (disk full or not writable?)")
+
+    def verify(tmp: Path) -> None:
+        try:
+            doc = json.loads(tmp.read_text(encoding="utf-8"))
+            ok = len(doc["parameters"]) == len(params)
+        except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError):
+            ok = False
+        if not ok:
+            raise ExportError(f"{dest}: the written camera trajectory is incomplete or unreadable")
+
+    return write_atomically(dest, "camera trajectory", write, verify=verify)
 
 
-def load_open3d_trajectory(path: PathLike) -> CameraPath:
+def load_open3d_trajectory(path: PathLike, *, max_frames: int = MAX_FRAMES) -> CameraPath:
     """Read an Open3D ``PinholeCameraTrajectory`` JSON file.
 
     The vertical FOV of each frame comes from ``fy`` and the image height,
@@ -274,11 +373,18 @@ def load_open3d_trajectory(path: PathLike) -> CameraPath:
     src = Path(path)
     if not src.is_file():
         raise InputError(src, "file not found")
+    doc = read_json_file(src, "camera trajectory")  # bounded before Open3D's own parser sees it
+    params = doc.get("parameters") if isinstance(doc, dict) else None
+    if not params:
+        raise InputError(src, "not an Open3D PinholeCameraTrajectory, or it has zero frames")
+    if not isinstance(params, list) or not all(isinstance(p, dict) for p in params):
+        raise InputError(src, "not an Open3D PinholeCameraTrajectory (expected an object whose 'parameters' "
+                              "is a list of camera objects)")
+    _check_frame_count(len(params), None, max_frames, src)
     try:
-        json.loads(src.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError) as e:
-        raise InputError(src, f"not a valid JSON file: {e}") from None
-    traj = o3io.read_pinhole_camera_trajectory(str(src))
+        traj = o3io.read_pinhole_camera_trajectory(str(src))
+    except RuntimeError as e:  # Open3D's JSON reader: a value of the wrong type
+        raise InputError(src, f"not an Open3D PinholeCameraTrajectory ({e})") from None
     if len(traj.parameters) == 0:
         raise InputError(src, "not an Open3D PinholeCameraTrajectory, or it has zero frames")
     mats: List[np.ndarray] = []

@@ -25,6 +25,7 @@ import math
 import os
 import re
 from pathlib import Path
+from tokenize import TokenError
 from typing import Optional, Tuple
 
 import cv2
@@ -155,7 +156,8 @@ def _read_values(path: PathLike) -> Tuple[np.ndarray, Optional[np.ndarray]]:
     if suffix == ".npy":
         try:
             a = np.load(io.BytesIO(data), allow_pickle=False)
-        except (ValueError, OSError, EOFError) as e:
+        # a corrupt header can make numpy's header parser raise SyntaxError or tokenize.TokenError
+        except (ValueError, OSError, EOFError, SyntaxError, TokenError, RecursionError, MemoryError) as e:
             raise InputError(path, f"not a valid .npy array file ({e})") from e
         if not isinstance(a, np.ndarray) or a.dtype.kind not in "fiu":
             raise InputError(path, f"expected a numeric (float or integer) array, got {getattr(a, 'dtype', type(a))}")

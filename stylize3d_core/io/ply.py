@@ -18,7 +18,8 @@ The file written by :func:`write_ply`::
 
 Coordinates are whatever frame the caller passes (usually the world frame of
 :mod:`stylize3d_core.geometry.camera`: the photo's camera, +z forward, y down).
-The file is written atomically (:func:`stylize3d_core.io.atomic.atomic_path`).
+The file is written atomically and read back before it replaces anything
+(:func:`stylize3d_core.io.atomic.write_atomically`).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ import numpy as np
 import torch
 
 from ..errors import ExportError, InputError, PathLike
-from .atomic import atomic_path
+from .atomic import write_atomically
 from .images import to_uint8
 
 _PLY_TYPES: Dict[str, str] = {
@@ -124,15 +125,24 @@ def write_ply(path: PathLike, xyz: Any, rgb: Any, *, labels: Optional[Any] = Non
     names = {"<f4": "float", "u1": "uchar"}
     header = ["ply", "format binary_little_endian 1.0", "comment stylize3d point cloud", f"element vertex {n}"]
     header += [f"property {names[t]} {name}" for name, t in fields] + ["end_header"]
-    try:
-        with atomic_path(dest) as tmp:
-            with open(tmp, "wb") as fh:
-                fh.write(("\n".join(header) + "\n").encode("ascii"))
-                fh.write(rec.tobytes())
-    except ExportError:
-        raise
-    except OSError as e:
-        raise ExportError(f"{dest}: could not write the point cloud: {e}") from e
+    head = ("\n".join(header) + "\n").encode("ascii")
+
+    def write(tmp: Path) -> None:
+        with open(tmp, "wb") as fh:
+            fh.write(head)
+            fh.write(rec.tobytes())
+
+    def verify(tmp: Path) -> None:  # read back: the header parses and announces the records that are there
+        data = tmp.read_bytes()
+        try:
+            count, dtype, offset = _parse_header(tmp, data)
+        except InputError as e:
+            raise ExportError(f"{dest}: the written point cloud does not read back ({e.problem})") from None
+        if count != n or dtype != rec.dtype or len(data) != offset + rec.nbytes:
+            raise ExportError(f"{dest}: the written point cloud is incomplete ({len(data)} of "
+                              f"{len(head) + rec.nbytes} bytes)")
+
+    write_atomically(dest, "point cloud", write, verify=verify, size=len(head) + rec.nbytes)
     return dest
 
 

@@ -18,24 +18,30 @@ The format comes from the destination path:
 
 Every write is atomic (:func:`stylize3d_core.io.atomic.atomic_path`): frames go
 to a temporary file or folder beside the destination, renamed into place only
-when the last frame is written. If the frame iterator or the progress callback
+when the last frame is written and the output reads back complete (MP4: ffmpeg
+reads it back with the frame count and size written; GIF: every frame decodes;
+PNG: every frame file verifies). A full disk, a file-size limit or a failing
+encoder is an :class:`ExportError`; the old destination is untouched. If the frame iterator or the progress callback
 raises -- a Cancel button raises :class:`ExportCancelled` from the callback --
 the temporary output is removed and an existing destination is untouched.
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import re
+import sys
+import tempfile
 from pathlib import Path
-from typing import Callable, Iterable, Iterator, Literal, Optional
+from typing import IO, Callable, Iterable, Iterator, Literal, Optional, Tuple
 
 import numpy as np
 from PIL import Image
 
 from ..errors import ExportError, InputError, PathLike, Stylize3DError
-from .atomic import atomic_path
+from .atomic import atomic_path, describe_os_error
 from .images import rgb_to_uint8
 
 Progress = Callable[[int, Optional[int]], None]
@@ -45,6 +51,7 @@ VideoKind = Literal["mp4", "gif", "png"]
 SUPPORTED = ".mp4, .gif, or a folder (path ending in '/' or without a suffix) for PNG frames"
 FRAME_NAME = "frame_{:04d}.png"
 _FRAME_RE = re.compile(r"^frame_\d{4,}\.png$")
+_FFMPEG_PREFIX = re.compile(r"^\[[^]]*\]\s*")  # "[out#0/mp4 @ 0x55...] " before an ffmpeg message
 MAX_GIF_FPS = 50.0
 GIF_PALETTE_SAMPLES = 128 * 128
 """Pixels sampled per frame to build its GIF palette (see ``_gif_frame``)."""
@@ -140,7 +147,95 @@ def _pad_even(frame: np.ndarray) -> np.ndarray:
     return np.pad(frame, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge")  # (H', W', 3)
 
 
-def _write_mp4(tmp: Path, source: _FrameSource, fps: float, quality: float) -> None:
+def _probe_mp4(path: Path) -> Tuple[int, Optional[Tuple[int, int]]]:
+    """(frame count, (width, height)) of an MP4, read back by ffmpeg (packets copied, not decoded).
+
+    Raises ExportError with ffmpeg's own words when the file does not read back.
+    """
+    import subprocess
+
+    import imageio_ffmpeg
+
+    cmd = [imageio_ffmpeg.get_ffmpeg_exe(), "-nostdin", "-hide_banner", "-i", str(path),
+           "-map", "0:v:0", "-c", "copy", "-f", "null", "-"]
+    try:
+        run = subprocess.run(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                             timeout=600)
+    except (OSError, subprocess.SubprocessError) as e:
+        raise ExportError(f"could not run ffmpeg to check the written video: {e}") from e
+    err = run.stderr.decode("utf-8", "replace")
+    frames = re.findall(r"frame=\s*(\d+)", err)
+    size = re.search(r"Video: .*?, (\d{2,5})x(\d{2,5})", err)
+    if run.returncode != 0 or not frames:
+        lines = [ln.strip() for ln in err.splitlines() if ln.strip() and not ln.startswith(" ")]
+        raise ExportError(f"ffmpeg cannot read it back ({lines[-1] if lines else f'exit status {run.returncode}'})")
+    return int(frames[-1]), (int(size.group(1)), int(size.group(2))) if size else None
+
+
+def _verify_mp4(dest: Path, source: "_FrameSource", log: Optional[IO[bytes]] = None) -> Callable[[Path], None]:
+    def verify(tmp: Path) -> None:
+        h, w = source.size
+        want = (w + w % 2, h + h % 2)
+        try:
+            count, size = _probe_mp4(tmp)
+        except ExportError as e:
+            raise ExportError(f"{dest}: the written video is incomplete{_ffmpeg_said(log)}: {e}"
+                              f"{_free_hint(dest)}") from None
+        if count != source.count or size != want:
+            raise ExportError(f"{dest}: the written video is incomplete{_ffmpeg_said(log)}: it reads back as "
+                              f"{count} frames of {size}, {source.count} frames of {want} were written"
+                              f"{_free_hint(dest)}")
+    return verify
+
+
+def _free_hint(dest: Path) -> str:
+    """'; the disk is full (N bytes free)' when the destination's disk is (nearly) full, else ''."""
+    import shutil
+
+    try:
+        free = shutil.disk_usage(dest.parent if str(dest.parent) else ".").free
+    except OSError:
+        return ""
+    return f"; the disk is full ({free:,} bytes free)" if free < 1024 * 1024 else ""
+
+
+def _verify_gif(dest: Path, source: "_FrameSource") -> Callable[[Path], None]:
+    def verify(tmp: Path) -> None:
+        h, w = source.size
+        try:
+            with Image.open(tmp) as im:
+                n = getattr(im, "n_frames", 1)
+                ok = im.format == "GIF" and im.size == (w, h) and 1 <= n <= source.count
+                for i in range(n):  # every frame decodes (a truncated GIF fails here)
+                    im.seek(i)
+                    im.load()
+        except Exception as e:  # Pillow raises many types for a truncated file
+            raise ExportError(f"{dest}: the written GIF does not read back ({e}){_free_hint(dest)}") from None
+        if not ok:
+            raise ExportError(f"{dest}: the written GIF is incomplete ({n} frames of {im.size}){_free_hint(dest)}")
+    return verify
+
+
+def _verify_png_folder(dest: Path, source: "_FrameSource") -> Callable[[Path], None]:
+    def verify(tmp: Path) -> None:
+        h, w = source.size
+        names = sorted(p.name for p in tmp.iterdir())
+        if names != [FRAME_NAME.format(i) for i in range(source.count)]:
+            raise ExportError(f"{dest}: the frames folder is incomplete ({len(names)} of {source.count} files)")
+        for name in names:
+            try:
+                with Image.open(tmp / name) as im:
+                    size = im.size
+                    im.verify()
+            except Exception as e:
+                raise ExportError(f"{dest}: frame {name} does not read back ({e}){_free_hint(dest)}") from None
+            if size != (w, h):
+                raise ExportError(f"{dest}: frame {name} reads back as {size}, not {(w, h)}")
+    return verify
+
+
+def _write_mp4(tmp: Path, source: _FrameSource, fps: float, quality: float, log: Optional[IO[bytes]] = None) -> None:
+    """Encode with ffmpeg; its error messages go to ``log`` (read by the check) instead of the console."""
     import imageio.v2 as iio  # lazy: imageio's plugin registry is slow to import
 
     writer = iio.get_writer(
@@ -149,10 +244,38 @@ def _write_mp4(tmp: Path, source: _FrameSource, fps: float, quality: float) -> N
         output_params=["-movflags", "+faststart"],
     )
     try:
-        for frame in source:
-            writer.append_data(_pad_even(frame))
+        for i, frame in enumerate(source):
+            if i == 0 and log is not None:
+                with _stderr_to(log):  # the first frame starts ffmpeg, which inherits this stderr
+                    writer.append_data(_pad_even(frame))
+            else:
+                writer.append_data(_pad_even(frame))
     finally:
         writer.close()
+
+
+@contextlib.contextmanager
+def _stderr_to(log: IO[bytes]) -> Iterator[None]:
+    """Point file descriptor 2 at ``log`` while a child process starts (it keeps the file)."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        os.dup2(log.fileno(), 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
+def _ffmpeg_said(log: Optional[IO[bytes]]) -> str:
+    """' (ffmpeg: <its last error line>)' from ffmpeg's captured stderr, or ''."""
+    if log is None:
+        return ""
+    log.seek(0)
+    lines = [ln.strip() for ln in log.read().decode("utf-8", "replace").splitlines() if ln.strip()]
+    if not lines:
+        return ""
+    return f" (ffmpeg: {_FFMPEG_PREFIX.sub('', lines[-1])[:200]})"
 
 
 def _gif_frame(frame: np.ndarray) -> Image.Image:
@@ -247,10 +370,13 @@ def write_video(
     if kind == "png":
         _check_frames_folder(dest)
     source = _FrameSource(frames, None if n_frames is None else int(n_frames), progress)
+    log = tempfile.TemporaryFile() if kind == "mp4" else None  # ffmpeg's stderr
     try:
-        with atomic_path(dest, directory=(kind == "png")) as tmp:
+        verify = _verify_mp4(dest, source, log) if kind == "mp4" else \
+            {"gif": _verify_gif, "png": _verify_png_folder}[kind](dest, source)
+        with atomic_path(dest, directory=(kind == "png"), verify=verify) as tmp:
             if kind == "mp4":
-                _write_mp4(tmp, source, fps_v, q)
+                _write_mp4(tmp, source, fps_v, q, log)
             elif kind == "gif":
                 _write_gif(tmp, source, fps_v)
             else:
@@ -258,7 +384,11 @@ def write_video(
     except (OSError, RuntimeError, ValueError) as e:
         if source.failed or isinstance(e, Stylize3DError):
             raise
-        raise ExportError(f"{dest}: could not write the {kind.upper()} output: {e}") from e
+        raise ExportError(f"{dest}: could not write the {kind.upper()} output: {describe_os_error(e)}"
+                          f"{_ffmpeg_said(log)}") from e
+    finally:
+        if log is not None:
+            log.close()
     return dest
 
 
