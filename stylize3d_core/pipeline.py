@@ -18,7 +18,7 @@ from .depth.refine import REFINE_METHODS
 from .depth.types import DepthMap
 from .geometry.camera import DEFAULT_FOV_Y_DEG, MAX_FOV_DEG, MIN_FOV_DEG, Cameras, check_fov
 from .geometry.trajectories import TrajectoryName, TrajectorySettings, make_trajectory
-from .io.camera_path import CameraPath, load_camera_path, save_camera_path
+from .io.camera_path import MAX_FRAMES, CameraPath, load_camera_path, save_camera_path
 from .io.images import load_image
 from .io.ply import write_ply
 from .io.video import MAX_GIF_FPS, Progress, video_kind, write_video
@@ -88,7 +88,8 @@ class RenderJob:
     output: str = option("out.mp4", flags=("-o", "--output"),
                          help="the video: .mp4, .gif, or a folder (ending in /) for PNG frames.")
     trajectory: TrajectoryName = option("circle", help="camera path shape (see geometry/trajectories.py).")
-    frames: int = option(90, low=1, high=10000, help="number of frames (90: 3 s at 30 fps, as the paper's code).")
+    frames: int = option(90, low=1, high=10_000_000,
+                         help="number of frames (90: 3 s at 30 fps, as the paper's code); at most max_frames.")
     fps: float = option(30.0, low=1.0, high=240.0, help=f"frames per second of the video (a GIF: at most "
                                                        f"{MAX_GIF_FPS:g}).")
     size: int = option(512, low=16, high=4096, help="long side of the output frames in pixels (the photo's aspect).")
@@ -103,12 +104,19 @@ class RenderJob:
     style: Optional[str] = option(None, metavar="IMAGE", default_text="none: the plain 3D photo",
                                   help="style image (a painting, a texture).")
     strength: float = option(0.8, low=0.0, high=1.0, help="style strength from 0 (photo) to 1.")
+    max_frames: int = option(MAX_FRAMES, low=1, high=10_000_000, metavar="N",
+                             help="most frames a render may have, from frames or a camera path (a guard "
+                                  "against runaway inputs: 10,000 frames are 5.5 min of video at 30 fps and "
+                                  "tens of minutes of rendering on a laptop CPU); raise it for longer videos.")
     model: str = option(DEFAULT_MODEL_NAME, metavar="MODEL",
                         help="the stylization model used with style: a shipped model's name (lite) or a "
                              "checkpoint you trained (.safetensors).")
 
     def __post_init__(self) -> None:
         check_options(self)
+        if self.camera_path is None and self.frames > self.max_frames:
+            raise InputError("frames", f"{self.frames:,} frames are more than max_frames={self.max_frames:,}; "
+                                       "raise max_frames (--max-frames) for a longer video")
         if self.camera_path is None and video_kind(self.output) == "gif" and self.fps > MAX_GIF_FPS:
             raise InputError("fps", f"a GIF plays at most {MAX_GIF_FPS:g} fps, got {self.fps!r}")
 
@@ -239,7 +247,8 @@ def run_render(job: RenderJob, *, progress: Optional[Progress] = None, log: Log 
     write the video (and the point cloud and camera path it asks for)."""
     check_outputs(job)
     style_inputs = _check_style_inputs(job) if job.style is not None else None
-    loaded_path = load_camera_path(job.camera_path) if job.camera_path is not None else None
+    loaded_path = (load_camera_path(job.camera_path, max_frames=job.max_frames)
+                   if job.camera_path is not None else None)
     if loaded_path is not None and loaded_path.fps is not None and video_kind(job.output) == "gif" \
             and loaded_path.fps > MAX_GIF_FPS:
         raise InputError(job.camera_path, f"its {loaded_path.fps:g} fps is too fast for a GIF "

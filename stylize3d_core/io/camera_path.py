@@ -258,7 +258,7 @@ def _check_frame_count(n: int, fps: Optional[float], max_frames: int, source: Pa
     if n > max_frames:
         length = f" ({n / fps / 60:.1f} min at {fps:g} fps)" if fps else ""
         raise InputError(source, f"the camera path has {n:,} frames{length}, more than the limit of "
-                                 f"{max_frames:,}; split it, or raise the limit (max_frames)")
+                                 f"{max_frames:,}; split it, or raise the limit (max_frames, --max-frames)")
 
 
 def load_camera_path(path: PathLike, *, max_frames: int = MAX_FRAMES) -> CameraPath:

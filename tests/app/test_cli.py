@@ -125,7 +125,9 @@ def test_failed_export_keeps_the_old_file(photo, tmp_path):
     (["--fps", "nan"], "fps: must be a finite number"),
     (["--fps", "inf"], "fps: must be a finite number"),
     (["--fps", "60", "-o", "{out}/v.gif"], "a GIF plays at most 50 fps"),
-    (["--frames", "10001"], "frames: must be an integer from 1 to 10000"),
+    (["--frames", "10001"], "10,001 frames are more than max_frames=10,000"),
+    (["--frames", "30", "--max-frames", "20"], "raise max_frames (--max-frames)"),
+    (["--max-frames", "0"], "max_frames: must be an integer from 1"),
     (["--size", "8"], "size: must be an integer from 16 to 4096"),
     (["--size", "100000"], "size: must be an integer from 16 to 4096"),
     (["--max-size", "4"], "max_size: must be an integer from 32 to 8192"),
@@ -175,6 +177,21 @@ def test_a_camera_path_too_fast_for_a_gif_is_refused_before_writing(photo, tmp_p
                "--save-ply", str(ply), "-q"])
     assert rc == 2 and "too fast for a GIF" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["fast.json"]
+
+
+def test_a_camera_path_longer_than_max_frames_is_refused_before_writing(photo, tmp_path, capsys):
+    from stylize3d_core.geometry.trajectories import static
+    from stylize3d_core.io.camera_path import save_camera_path
+
+    cams = save_camera_path(tmp_path / "long.json", static(30), fps=30)
+    rc = main(["render", str(photo), "--camera-path", str(cams), "--max-frames", "20", "-o", str(tmp_path / "v.mp4"),
+               "--save-ply", str(tmp_path / "c.ply"), "-q"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "30 frames" in err and "--max-frames" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["long.json"]
+    rc = main(["render", str(photo), "--camera-path", str(cams), "--max-frames", "30", "--size", "32",
+               "-o", str(tmp_path / "v.mp4"), "-q"])
+    assert rc == 0 and (tmp_path / "v.mp4").is_file()
 
 
 def test_render_options_are_the_job_fields():
