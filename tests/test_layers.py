@@ -23,6 +23,7 @@ LAYERS: Tuple[Tuple[str, ...], ...] = (
     ("render", "points"),
     ("models",),
     ("train", "stylize"),
+    ("export",),
     ("eval", "pipeline"),
     ("stylize3d_core",),
 )
