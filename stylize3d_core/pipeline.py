@@ -18,10 +18,14 @@ from .depth.refine import REFINE_METHODS
 from .depth.types import DepthMap
 from .geometry.camera import DEFAULT_FOV_Y_DEG, MAX_FOV_DEG, MIN_FOV_DEG, Cameras, check_fov
 from .geometry.trajectories import TrajectoryName, TrajectorySettings, make_trajectory
-from .io.camera_path import CameraPath, load_camera_path, save_camera_path
+from .export.camera_paths import read_camera_path, write_camera_path
+from .export.frames import output_kind, write_frames
+from .export.layered import LayerSettings
+from .export.settings import POINT_KINDS, ExportSettings
+from .io.camera_path import CameraPath, save_camera_path
 from .io.images import load_image
 from .io.ply import write_ply
-from .io.video import MAX_GIF_FPS, Progress, video_kind, write_video
+from .io.video import MAX_GIF_FPS, Progress
 from .options import check_options, documented, option
 from .render.plain import PlainRenderer, PlainRenderSettings, frame_size
 from .scene.ldi import LDISettings
@@ -103,11 +107,18 @@ class RenderJob:
     strength: float = option(0.8, low=0.0, high=1.0, help="style strength from 0 (photo) to 1.")
     model: str = option(DEFAULT_MODEL, metavar="CHECKPOINT", default_text="the shipped lite model",
                         help="the stylization model checkpoint used with style.")
+    exports: ExportSettings = option(default_factory=ExportSettings,
+                                     help="point files, stereo and loops (stylize3d_core/export/).")
+    layers: LayerSettings = option(default_factory=LayerSettings,
+                                   help="a foreground kept unstylized (stylize3d_core/export/layered.py).")
 
     def __post_init__(self) -> None:
         check_options(self)
-        if self.camera_path is None and video_kind(self.output) == "gif" and self.fps > MAX_GIF_FPS:
+        if self.exports.export not in POINT_KINDS and self.camera_path is None \
+                and output_kind(self.output) == "gif" and self.fps > MAX_GIF_FPS:
             raise InputError("fps", f"a GIF plays at most {MAX_GIF_FPS:g} fps, got {self.fps!r}")
+        if self.layers.active and self.style is None:
+            raise InputError("mask", "layered stylization needs a style (--style): without one nothing is stylized")
 
 
 def _check_destination(path: str, what: str, suffixes: Tuple[str, ...]) -> None:
@@ -123,9 +134,11 @@ def _check_destination(path: str, what: str, suffixes: Tuple[str, ...]) -> None:
 
 def check_outputs(job: RenderJob) -> None:
     """Check every output path of ``job`` (extension, existing folder, no clashes) before anything is written."""
-    kind = video_kind(job.output)  # InputError naming an unknown extension
     out = Path(job.output)
-    if kind == "png":
+    kind = "ply" if job.exports.export in POINT_KINDS else output_kind(job.output)  # InputError: unknown suffix
+    if kind == "ply":
+        _check_destination(job.output, f"--export {job.exports.export}'s point file", (".ply",))
+    elif kind == "png":
         parent = out.parent if str(out.parent) else Path(".")
         if not parent.is_dir():
             raise InputError(job.output, f"folder {parent} does not exist")
@@ -137,8 +150,11 @@ def check_outputs(job: RenderJob) -> None:
         _check_destination(job.save_ply, "a point cloud file", (".ply",))
     if job.save_camera_path is not None:
         _check_destination(job.save_camera_path, "a camera-path file", (".json",))
-    inputs = [p for p in (job.spec.photo, job.camera_path, job.style) if p is not None]
-    outputs = [p for p in (job.output, job.save_ply, job.save_camera_path) if p is not None]
+    if job.exports.save_trajectory is not None:
+        _check_destination(job.exports.save_trajectory, "an Open3D trajectory file", (".json",))
+    inputs = [p for p in (job.spec.photo, job.camera_path, job.style, job.layers.mask) if p is not None]
+    outputs = [p for p in (job.output, job.save_ply, job.save_camera_path, job.exports.save_trajectory)
+               if p is not None]
     seen: Dict[Path, str] = {}
     for p in outputs:
         key = Path(p).resolve()
@@ -204,7 +220,7 @@ def job_cameras(job: RenderJob, fov_y_deg: float, loaded: Optional[CameraPath] =
     """The cameras and fps a job renders: its camera path (``loaded``, else read from its file), else its
     trajectory."""
     if job.camera_path is not None:
-        path = loaded if loaded is not None else load_camera_path(job.camera_path)
+        path = loaded if loaded is not None else read_camera_path(job.camera_path)
         return path.cameras, float(path.fps or job.fps)
     settings = TrajectorySettings(name=job.trajectory, n_frames=job.frames, fov_y_deg=fov_y_deg)
     return make_trajectory(settings), float(job.fps)
@@ -238,8 +254,8 @@ def run_render(job: RenderJob, *, progress: Optional[Progress] = None, log: Log 
     write the video (and the point cloud and camera path it asks for)."""
     check_outputs(job)
     style_inputs = _check_style_inputs(job) if job.style is not None else None
-    loaded_path = load_camera_path(job.camera_path) if job.camera_path is not None else None
-    if loaded_path is not None and loaded_path.fps is not None and video_kind(job.output) == "gif" \
+    loaded_path = read_camera_path(job.camera_path) if job.camera_path is not None else None
+    if loaded_path is not None and loaded_path.fps is not None and output_kind(job.output) == "gif" \
             and loaded_path.fps > MAX_GIF_FPS:
         raise InputError(job.camera_path, f"its {loaded_path.fps:g} fps is too fast for a GIF "
                                           f"(at most {MAX_GIF_FPS:g})")
@@ -254,12 +270,41 @@ def run_render(job: RenderJob, *, progress: Optional[Progress] = None, log: Log 
     if job.save_camera_path is not None:
         save_camera_path(job.save_camera_path, cameras, fps=fps, image_size=(H, W))
         log(f"wrote {job.save_camera_path}")
-    if job.style is None:
-        frames = PlainRenderer(p3d.points, PlainRenderSettings(supersample=job.supersample)).frames(cameras, H, W)
-    else:
-        frames = _stylized(p3d, job, *style_inputs, timings, log).frames(cameras, H, W)
+    if job.exports.save_trajectory is not None:
+        write_camera_path(job.exports.save_trajectory, cameras, fmt="open3d", fps=fps, image_size=(H, W))
+        log(f"wrote {job.exports.save_trajectory} (Open3D PinholeCameraTrajectory)")
+    renderer = _renderer(p3d, job, style_inputs, timings, log)
     t0 = time.perf_counter()
-    out = write_video(job.output, frames, fps=fps, n_frames=len(cameras), progress=progress)
+    if job.exports.export in POINT_KINDS:
+        from .export.run import export_points
+
+        out = export_points(job.output, job.exports, p3d, renderer, stylized=job.style is not None)
+        timings["bake+write"] = time.perf_counter() - t0
+        log(f"wrote {out}: {len(p3d.points):,} points ({job.exports.export})")
+        return RenderResult(Path(out), 0, (H, W), len(p3d.points), timings)
+    from .export.run import export_frames
+
+    frames, n_frames = export_frames(job.exports, p3d, renderer, cameras, H, W)
+    out = write_frames(job.output, frames, fps=fps, n_frames=n_frames, progress=progress)
     timings["render+encode"] = time.perf_counter() - t0
-    log(f"wrote {out}: {len(cameras)} frames of {W}x{H}")
-    return RenderResult(Path(out), len(cameras), (H, W), len(p3d.points), timings)
+    log(f"wrote {out}: {n_frames} frames ({job.exports.export}) from {W}x{H} views")
+    return RenderResult(Path(out), n_frames, (H, W), len(p3d.points), timings)
+
+
+def _renderer(p3d: Photo3D, job: RenderJob, style_inputs, timings: Dict[str, float], log: Log):
+    """What renders the job's views: the plain renderer, the stylized photo, or its layered composition."""
+    if job.style is None:
+        return PlainRenderer(p3d.points, PlainRenderSettings(supersample=job.supersample))
+    stylized = _stylized(p3d, job, *style_inputs, timings, log)
+    if not job.layers.active:
+        return stylized
+    from .export.layered import LayeredRenderer, photo_mask
+    from .scene.masks import point_mask
+
+    file_size = load_image(job.spec.photo, max_size=job.spec.max_size).original_size
+    mask = photo_mask(job.layers, p3d, file_size)
+    log(f"foreground mask: {mask.mean():.0%} of the photo kept "
+        f"{'unstylized' if job.layers.foreground_strength is None else f'at strength {job.layers.foreground_strength:g}'}")
+    return LayeredRenderer(p3d, point_mask(p3d.ldi, mask), stylized,
+                           foreground_strength=job.layers.foreground_strength,
+                           settings=PlainRenderSettings(supersample=job.supersample))
