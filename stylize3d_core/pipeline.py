@@ -70,11 +70,16 @@ class PhotoSpec:
                                 "d ** relief before the scene is normalised, so the nearest surface stays put, "
                                 "the photo's own view is unchanged and farther things move away (or closer); "
                                 "1 keeps the depth as estimated.")
+    stereo_card: bool = option(False, help="the photo is a scanned stereo card (two prints side by side on a "
+                                           "mount): split, align and match it for depth, browse its left print "
+                                           "(the same as --depth stereo:card).")
     ldi: LDISettings = option(default_factory=LDISettings, cli=False,
                               help="layered-depth-image settings (tearing, hidden layer, border).")
 
     def __post_init__(self) -> None:
         check_options(self)
+        if self.stereo_card and self.depth not in ("auto", "stereo:card"):
+            raise InputError("stereo_card", f"a stereo card gives its own depth; drop --depth {self.depth}")
 
 
 @documented
@@ -194,6 +199,8 @@ def load_photo3d(spec: PhotoSpec, *, log: Log = _quiet) -> Photo3D:
     if spec.photo is None:
         raise InputError("photo", "no photo given")
     photo, depth, max_size, fov = spec.photo, spec.depth, spec.max_size, spec.fov
+    if spec.stereo_card:
+        depth = "stereo:card"
     refine = None if spec.refine_depth is None else RefineSettings(method=spec.refine_depth)
     t0 = time.perf_counter()
     image = load_image(photo, max_size=max_size)
