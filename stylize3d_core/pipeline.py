@@ -112,6 +112,10 @@ class RenderJob:
     strength: float = option(0.8, low=0.0, high=1.0, help="style strength from 0 (photo) to 1.")
     model: str = option(DEFAULT_MODEL, metavar="CHECKPOINT", default_text="the shipped lite model",
                         help="the stylization model checkpoint used with style.")
+    views: Optional[str] = option(None, metavar="JSON",
+                                  help="multi-view input: merge the photos of this views file (images, depth files, "
+                                       "poses; see stylize3d_core/multiview.py) into one 3D photo in the frame of "
+                                       "PHOTO, one of them.")
     exports: ExportSettings = option(default_factory=ExportSettings,
                                      help="point files, stereo and loops (stylize3d_core/export/).")
     layers: LayerSettings = option(default_factory=LayerSettings,
@@ -122,6 +126,8 @@ class RenderJob:
         if self.exports.export not in POINT_KINDS and self.camera_path is None \
                 and output_kind(self.output) == "gif" and self.fps > MAX_GIF_FPS:
             raise InputError("fps", f"a GIF plays at most {MAX_GIF_FPS:g} fps, got {self.fps!r}")
+        if self.views is not None and (self.layers.active or self.spec.stereo_card):
+            raise InputError("views", "multi-view input takes no --mask, --mask-rect or --stereo-card")
         if self.layers.active and self.style is None:
             raise InputError("mask", "layered stylization needs a style (--style): without one nothing is stylized")
 
@@ -157,7 +163,7 @@ def check_outputs(job: RenderJob) -> None:
         _check_destination(job.save_camera_path, "a camera-path file", (".json",))
     if job.exports.save_trajectory is not None:
         _check_destination(job.exports.save_trajectory, "an Open3D trajectory file", (".json",))
-    inputs = [p for p in (job.spec.photo, job.camera_path, job.style, job.layers.mask) if p is not None]
+    inputs = [p for p in (job.spec.photo, job.camera_path, job.style, job.layers.mask, job.views) if p is not None]
     outputs = [p for p in (job.output, job.save_ply, job.save_camera_path, job.exports.save_trajectory)
                if p is not None]
     seen: Dict[Path, str] = {}
@@ -266,7 +272,13 @@ def run_render(job: RenderJob, *, progress: Optional[Progress] = None, log: Log 
             and loaded_path.fps > MAX_GIF_FPS:
         raise InputError(job.camera_path, f"its {loaded_path.fps:g} fps is too fast for a GIF "
                                           f"(at most {MAX_GIF_FPS:g})")
-    p3d = load_photo3d(job.spec, log=log)
+    if job.views is None:
+        p3d = load_photo3d(job.spec, log=log)
+    else:
+        from .multiview import load_merged
+
+        settings = Photo3DSettings(ldi=job.spec.ldi)
+        p3d = load_merged(job.views, job.spec.photo, settings, max_size=job.spec.max_size, log=log).photo
     timings = dict(p3d.timings)
     cameras, fps = job_cameras(job, p3d.fov_y_deg, loaded_path)
     H, W = frame_size(p3d.size, job.size)

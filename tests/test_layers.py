@@ -24,6 +24,7 @@ LAYERS: Tuple[Tuple[str, ...], ...] = (
     ("models",),
     ("train", "stylize"),
     ("export",),
+    ("multiview",),
     ("eval", "pipeline"),
     ("stylize3d_core",),
 )
