@@ -7,44 +7,17 @@ import pytest
 from app.cli import main
 from stylize3d_core.depth.sources import StereoCardDepth, parse_depth_spec
 from stylize3d_core.depth.stereo_card import CardSettings, card_depth, card_views, match_exposure
-from stylize3d_core.depth.types import DepthMap
 from stylize3d_core.errors import InputError
-from stylize3d_core.geometry.camera import Cameras
+from stylize3d_core.eval.stereo_card import synthetic_card
 from stylize3d_core.io.images import load_image_array, save_image
-from stylize3d_core.render.plain import PlainRenderer
-from stylize3d_core.scene.photo3d import Photo3D
 
-ROTATION = 1.5  # degrees, of the right print
-NEAR = (slice(60, 200), slice(70, 170))  # the near box of the scene (depth 1 before 2)
-
-
-def synthetic_card(rotation_deg=ROTATION, gain=0.75, offset=0.08):
-    """A known scene (a textured photo, a near box at half the background's depth) seen by two cameras
-    0.03 scene units apart, mounted on a cream card with borders, the right print rotated, darker and
-    4 px lower. Returns (card, left view, the left print's box on the card)."""
-    import skimage.data
-
-    rgb = (cv2.resize(skimage.data.astronaut(), (240, 240), interpolation=cv2.INTER_AREA) / 255.0).astype(np.float32)
-    depth = np.full((240, 240), 2.0, np.float32)
-    depth[NEAR] = 1.0
-    p3d = Photo3D.build(rgb, DepthMap(depth, np.ones_like(depth, bool), "metric", "synthetic"))
-    pose = np.eye(4)
-    pose[0, 3] = 0.03
-    right = PlainRenderer(p3d.points).render(Cameras.create(pose, p3d.fov_y_deg), 240, 240)
-    right = cv2.warpAffine(right, cv2.getRotationMatrix2D((120, 120), rotation_deg, 1.0), (240, 240),
-                           borderMode=cv2.BORDER_REFLECT)
-    right = np.clip(right * gain + offset, 0, 1)
-    card = np.empty((280, 536, 3), np.float32)
-    card[:] = (0.86, 0.8, 0.68)
-    card[20:260, 20:260] = rgb
-    card[24:264, 276:516] = right
-    noise = 0.01 * np.random.default_rng(0).standard_normal(card.shape)
-    return np.clip(card + noise, 0, 1).astype(np.float32), rgb, (20, 260, 20, 260)
+ROTATION = 1.5  # degrees, of the right print (synthetic_card's default)
 
 
 @pytest.fixture(scope="module")
 def card():
-    return synthetic_card()
+    made = synthetic_card(rotation_deg=ROTATION)
+    return made.card, made.left, made.left_box
 
 
 def test_card_is_split_aligned_and_rectified(card):
