@@ -314,16 +314,17 @@ def _renderer(p3d: Photo3D, job: RenderJob, style_inputs, timings: Dict[str, flo
     """What renders the job's views: the plain renderer, the stylized photo, or its layered composition."""
     if job.style is None:
         return PlainRenderer(p3d.points, PlainRenderSettings(supersample=job.supersample))
-    stylized = _stylized(p3d, job, *style_inputs, timings, log)
     if not job.layers.active:
-        return stylized
+        return _stylized(p3d, job, *style_inputs, timings, log)
     from .export.layered import LayeredRenderer, photo_mask
     from .scene.masks import point_mask
 
     file_size = load_image(job.spec.photo, max_size=job.spec.max_size).original_size
-    mask = photo_mask(job.layers, p3d, file_size)
-    log(f"foreground mask: {mask.mean():.0%} of the photo kept "
-        f"{'unstylized' if job.layers.foreground_strength is None else f'at strength {job.layers.foreground_strength:g}'}")
+    mask = photo_mask(job.layers, p3d, file_size)  # before the model loads: a bad mask fails fast
+    kept = "unstylized" if job.layers.foreground_strength is None else \
+        f"at strength {job.layers.foreground_strength:g}"
+    log(f"foreground mask: {mask.mean():.0%} of the photo kept {kept}")
+    stylized = _stylized(p3d, job, *style_inputs, timings, log)
     return LayeredRenderer(p3d, point_mask(p3d.ldi, mask), stylized,
                            foreground_strength=job.layers.foreground_strength,
                            settings=PlainRenderSettings(supersample=job.supersample))

@@ -88,6 +88,23 @@ def test_layered_render_keeps_the_foreground(style, untrained, tmp_path):
     assert np.abs(frame[outside] - src[outside]).mean() > 10  # the background is stylized
 
 
+def test_mask_file_at_the_photo_files_size(style, untrained, tmp_path):
+    yy, xx = np.mgrid[:128, :192]
+    disc = (yy - 64) ** 2 + (xx - 96) ** 2 < 36 ** 2
+    rgb = 0.3 + 0.2 * np.random.default_rng(1).random((128, 192, 3))
+    rgb[disc] = (0.1, 0.3, 0.9)
+    photo, mask = tmp_path / "disc.png", tmp_path / "mask.png"
+    save_image(photo, rgb)
+    Image.fromarray((disc * 255).astype(np.uint8)).save(mask)
+    out = tmp_path / "frames"
+    assert main(["render", str(photo), "--style", str(style), "--model", str(untrained), "--mask", str(mask),
+                 "--max-size", "96", "--trajectory", "static", "--frames", "1", "--size", "96", "-o", str(out) + "/",
+                 "-q"]) == 0  # the photo is shrunk to 96 x 64: so is the mask
+    frame = iio.imread(out / "frame_0000.png").astype(float)
+    inner = ((yy - 64) ** 2 + (xx - 96) ** 2 < 28 ** 2)[::2, ::2]
+    assert np.abs(frame[inner] - np.array([0.1, 0.3, 0.9]) * 255).mean() < 4
+
+
 @pytest.mark.parametrize("extra, message", [
     (["--export", "anaglyph", "--eye-distance", "0.6"], "eye_distance: 0.6 would put an eye"),
     (["--export", "ply"], "must end in .ply"),
