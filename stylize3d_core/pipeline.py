@@ -18,10 +18,14 @@ from .depth.refine import REFINE_METHODS
 from .depth.types import DepthMap
 from .geometry.camera import DEFAULT_FOV_Y_DEG, MAX_FOV_DEG, MIN_FOV_DEG, Cameras, check_fov
 from .geometry.trajectories import TrajectoryName, TrajectorySettings, make_trajectory
-from .io.camera_path import MAX_FRAMES, CameraPath, load_camera_path, save_camera_path
+from .export.camera_paths import read_camera_path, write_camera_path
+from .export.frames import output_kind, write_frames
+from .export.layered import LayerSettings
+from .export.settings import POINT_KINDS, ExportSettings
+from .io.camera_path import MAX_FRAMES, CameraPath, save_camera_path
 from .io.images import load_image
 from .io.ply import write_ply
-from .io.video import MAX_GIF_FPS, Progress, video_kind, write_video
+from .io.video import MAX_GIF_FPS, Progress
 from .options import check_options, documented, option
 from .render.plain import PlainRenderer, PlainRenderSettings, frame_size
 from .resources import DEFAULT_MODEL_NAME, default_model, resolve_model
@@ -68,11 +72,16 @@ class PhotoSpec:
                                 "d ** relief before the scene is normalised, so the nearest surface stays put, "
                                 "the photo's own view is unchanged and farther things move away (or closer); "
                                 "1 keeps the depth as estimated.")
+    stereo_card: bool = option(False, help="the photo is a scanned stereo card (two prints side by side on a "
+                                           "mount): split, align and match it for depth, browse its left print "
+                                           "(the same as --depth stereo:card).")
     ldi: LDISettings = option(default_factory=LDISettings, cli=False,
                               help="layered-depth-image settings (tearing, hidden layer, border).")
 
     def __post_init__(self) -> None:
         check_options(self)
+        if self.stereo_card and self.depth not in ("auto", "stereo:card"):
+            raise InputError("stereo_card", f"a stereo card gives its own depth; drop --depth {self.depth}")
 
 
 @documented
@@ -111,14 +120,27 @@ class RenderJob:
     model: str = option(DEFAULT_MODEL_NAME, metavar="MODEL",
                         help="the stylization model used with style: a shipped model's name (lite) or a "
                              "checkpoint you trained (.safetensors).")
+    views: Optional[str] = option(None, metavar="JSON",
+                                  help="multi-view input: merge the photos of this views file (images, depth files, "
+                                       "poses; see stylize3d_core/multiview.py) into one 3D photo in the frame of "
+                                       "PHOTO, one of them.")
+    exports: ExportSettings = option(default_factory=ExportSettings,
+                                     help="point files, stereo and loops (stylize3d_core/export/).")
+    layers: LayerSettings = option(default_factory=LayerSettings,
+                                   help="a foreground kept unstylized (stylize3d_core/export/layered.py).")
 
     def __post_init__(self) -> None:
         check_options(self)
         if self.camera_path is None and self.frames > self.max_frames:
             raise InputError("frames", f"{self.frames:,} frames are more than max_frames={self.max_frames:,}; "
                                        "raise max_frames (--max-frames) for a longer video")
-        if self.camera_path is None and video_kind(self.output) == "gif" and self.fps > MAX_GIF_FPS:
+        if self.exports.export not in POINT_KINDS and self.camera_path is None \
+                and output_kind(self.output) == "gif" and self.fps > MAX_GIF_FPS:
             raise InputError("fps", f"a GIF plays at most {MAX_GIF_FPS:g} fps, got {self.fps!r}")
+        if self.views is not None and (self.layers.active or self.spec.stereo_card):
+            raise InputError("views", "multi-view input takes no --mask, --mask-rect or --stereo-card")
+        if self.layers.active and self.style is None:
+            raise InputError("mask", "layered stylization needs a style (--style): without one nothing is stylized")
 
 
 def _check_destination(path: str, what: str, suffixes: Tuple[str, ...]) -> None:
@@ -134,9 +156,11 @@ def _check_destination(path: str, what: str, suffixes: Tuple[str, ...]) -> None:
 
 def check_outputs(job: RenderJob) -> None:
     """Check every output path of ``job`` (extension, existing folder, no clashes) before anything is written."""
-    kind = video_kind(job.output)  # InputError naming an unknown extension
     out = Path(job.output)
-    if kind == "png":
+    kind = "ply" if job.exports.export in POINT_KINDS else output_kind(job.output)  # InputError: unknown suffix
+    if kind == "ply":
+        _check_destination(job.output, f"--export {job.exports.export}'s point file", (".ply",))
+    elif kind == "png":
         parent = out.parent if str(out.parent) else Path(".")
         if not parent.is_dir():
             raise InputError(job.output, f"folder {parent} does not exist")
@@ -148,8 +172,11 @@ def check_outputs(job: RenderJob) -> None:
         _check_destination(job.save_ply, "a point cloud file", (".ply",))
     if job.save_camera_path is not None:
         _check_destination(job.save_camera_path, "a camera-path file", (".json",))
-    inputs = [p for p in (job.spec.photo, job.camera_path, job.style) if p is not None]
-    outputs = [p for p in (job.output, job.save_ply, job.save_camera_path) if p is not None]
+    if job.exports.save_trajectory is not None:
+        _check_destination(job.exports.save_trajectory, "an Open3D trajectory file", (".json",))
+    inputs = [p for p in (job.spec.photo, job.camera_path, job.style, job.layers.mask, job.views) if p is not None]
+    outputs = [p for p in (job.output, job.save_ply, job.save_camera_path, job.exports.save_trajectory)
+               if p is not None]
     seen: Dict[Path, str] = {}
     for p in outputs:
         key = Path(p).resolve()
@@ -189,6 +216,8 @@ def load_photo3d(spec: PhotoSpec, *, log: Log = _quiet) -> Photo3D:
     if spec.photo is None:
         raise InputError("photo", "no photo given")
     photo, depth, max_size, fov = spec.photo, spec.depth, spec.max_size, spec.fov
+    if spec.stereo_card:
+        depth = "stereo:card"
     refine = None if spec.refine_depth is None else RefineSettings(method=spec.refine_depth)
     t0 = time.perf_counter()
     image = load_image(photo, max_size=max_size)
@@ -215,7 +244,7 @@ def job_cameras(job: RenderJob, fov_y_deg: float, loaded: Optional[CameraPath] =
     """The cameras and fps a job renders: its camera path (``loaded``, else read from its file), else its
     trajectory."""
     if job.camera_path is not None:
-        path = loaded if loaded is not None else load_camera_path(job.camera_path)
+        path = loaded if loaded is not None else read_camera_path(job.camera_path)
         return path.cameras, float(path.fps or job.fps)
     settings = TrajectorySettings(name=job.trajectory, n_frames=job.frames, fov_y_deg=fov_y_deg)
     return make_trajectory(settings), float(job.fps)
@@ -247,13 +276,19 @@ def run_render(job: RenderJob, *, progress: Optional[Progress] = None, log: Log 
     write the video (and the point cloud and camera path it asks for)."""
     check_outputs(job)
     style_inputs = _check_style_inputs(job) if job.style is not None else None
-    loaded_path = (load_camera_path(job.camera_path, max_frames=job.max_frames)
+    loaded_path = (read_camera_path(job.camera_path, max_frames=job.max_frames)
                    if job.camera_path is not None else None)
-    if loaded_path is not None and loaded_path.fps is not None and video_kind(job.output) == "gif" \
+    if loaded_path is not None and loaded_path.fps is not None and output_kind(job.output) == "gif" \
             and loaded_path.fps > MAX_GIF_FPS:
         raise InputError(job.camera_path, f"its {loaded_path.fps:g} fps is too fast for a GIF "
                                           f"(at most {MAX_GIF_FPS:g})")
-    p3d = load_photo3d(job.spec, log=log)
+    if job.views is None:
+        p3d = load_photo3d(job.spec, log=log)
+    else:
+        from .multiview import load_merged
+
+        settings = Photo3DSettings(ldi=job.spec.ldi)
+        p3d = load_merged(job.views, job.spec.photo, settings, max_size=job.spec.max_size, log=log).photo
     timings = dict(p3d.timings)
     cameras, fps = job_cameras(job, p3d.fov_y_deg, loaded_path)
     H, W = frame_size(p3d.size, job.size)
@@ -264,12 +299,42 @@ def run_render(job: RenderJob, *, progress: Optional[Progress] = None, log: Log 
     if job.save_camera_path is not None:
         save_camera_path(job.save_camera_path, cameras, fps=fps, image_size=(H, W))
         log(f"wrote {job.save_camera_path}")
-    if job.style is None:
-        frames = PlainRenderer(p3d.points, PlainRenderSettings(supersample=job.supersample)).frames(cameras, H, W)
-    else:
-        frames = _stylized(p3d, job, *style_inputs, timings, log).frames(cameras, H, W)
+    if job.exports.save_trajectory is not None:
+        write_camera_path(job.exports.save_trajectory, cameras, fmt="open3d", fps=fps, image_size=(H, W))
+        log(f"wrote {job.exports.save_trajectory} (Open3D PinholeCameraTrajectory)")
+    renderer = _renderer(p3d, job, style_inputs, timings, log)
     t0 = time.perf_counter()
-    out = write_video(job.output, frames, fps=fps, n_frames=len(cameras), progress=progress)
+    if job.exports.export in POINT_KINDS:
+        from .export.run import export_points
+
+        out = export_points(job.output, job.exports, p3d, renderer, stylized=job.style is not None)
+        timings["bake+write"] = time.perf_counter() - t0
+        log(f"wrote {out}: {len(p3d.points):,} points ({job.exports.export})")
+        return RenderResult(Path(out), 0, (H, W), len(p3d.points), timings)
+    from .export.run import export_frames
+
+    frames, n_frames = export_frames(job.exports, p3d, renderer, cameras, H, W)
+    out = write_frames(job.output, frames, fps=fps, n_frames=n_frames, progress=progress)
     timings["render+encode"] = time.perf_counter() - t0
-    log(f"wrote {out}: {len(cameras)} frames of {W}x{H}")
-    return RenderResult(Path(out), len(cameras), (H, W), len(p3d.points), timings)
+    log(f"wrote {out}: {n_frames} frames ({job.exports.export}) from {W}x{H} views")
+    return RenderResult(Path(out), n_frames, (H, W), len(p3d.points), timings)
+
+
+def _renderer(p3d: Photo3D, job: RenderJob, style_inputs, timings: Dict[str, float], log: Log):
+    """What renders the job's views: the plain renderer, the stylized photo, or its layered composition."""
+    if job.style is None:
+        return PlainRenderer(p3d.points, PlainRenderSettings(supersample=job.supersample))
+    if not job.layers.active:
+        return _stylized(p3d, job, *style_inputs, timings, log)
+    from .export.layered import LayeredRenderer, photo_mask
+    from .scene.masks import point_mask
+
+    file_size = load_image(job.spec.photo, max_size=job.spec.max_size).original_size
+    mask = photo_mask(job.layers, p3d, file_size)  # before the model loads: a bad mask fails fast
+    kept = "unstylized" if job.layers.foreground_strength is None else \
+        f"at strength {job.layers.foreground_strength:g}"
+    log(f"foreground mask: {mask.mean():.0%} of the photo kept {kept}")
+    stylized = _stylized(p3d, job, *style_inputs, timings, log)
+    return LayeredRenderer(p3d, point_mask(p3d.ldi, mask), stylized,
+                           foreground_strength=job.layers.foreground_strength,
+                           settings=PlainRenderSettings(supersample=job.supersample))

@@ -24,6 +24,8 @@ LAYERS: Tuple[Tuple[str, ...], ...] = (
     ("render", "points"),
     ("models",),
     ("train", "stylize"),
+    ("export",),
+    ("multiview",),
     ("eval", "pipeline"),
     ("stylize3d_core",),
     ("info",),

@@ -20,6 +20,9 @@ spec (command line ``--depth``)     source
 ``stereo:sbs`` / ``stereo:sbs:cross``  :class:`StereoDepth`: the photo is a side-by-side
                                     stereo card (parallel / cross-eyed); the photo used
                                     is its left view, returned as ``PhotoDepth.rgb``
+``stereo:card``                     :class:`StereoCardDepth`: a scanned historical card
+                                    (mount borders, exposure, rotation: :mod:`.stereo_card`);
+                                    the photo used is its cropped left print
 =================================  =================================================
 
 Any source can be followed by edge alignment (:mod:`.refine`) by wrapping it in
@@ -42,10 +45,12 @@ from .phone_xmp import embedded_depth_map, has_embedded_depth
 from .prior import PriorSettings, estimate_prior
 from .refine import RefineSettings, refine_depth
 from .stereo import StereoSettings, compute_disparity, disparity_to_depth, split_side_by_side
+from .stereo_card import CardSettings, card_depth
 from .types import DepthMap, PhotoDepth
 
 SPEC_HELP = (
-    "auto, prior, phone, FILE, FILE:disparity, onnx:MODEL.onnx[:PRESET], stereo:RIGHT_IMAGE, stereo:sbs[:cross]"
+    "auto, prior, phone, FILE, FILE:disparity, onnx:MODEL.onnx[:PRESET], stereo:RIGHT_IMAGE, stereo:sbs[:cross], "
+    "stereo:card"
 )
 
 
@@ -185,6 +190,21 @@ class StereoDepth(DepthSource):
         return "stereo card" if self.side_by_side else f"stereo pair with {self.right_path}"
 
 
+class StereoCardDepth(DepthSource):
+    """Depth from a scanned stereo card: prints on a mount, split, exposure-matched, aligned by features and
+    rectified (:mod:`.stereo_card`). The photo used is the cropped left print, returned as ``PhotoDepth.rgb``."""
+
+    def __init__(self, settings: CardSettings = CardSettings()) -> None:
+        self.settings = settings
+
+    def estimate(self, image: LoadedImage) -> PhotoDepth:
+        image = _check_image(image)
+        return card_depth(image.rgb, self.settings, image.path if image.path is not None else "stereo card")
+
+    def describe(self) -> str:
+        return "scanned stereo card"
+
+
 class PhoneDepth(DepthSource):
     """Depth embedded by a phone camera in the photo's JPEG (GDepth or Dynamic Depth, :mod:`.phone_xmp`).
 
@@ -278,7 +298,9 @@ def parse_depth_spec(spec: str, *, refine: Optional[RefineSettings] = None) -> D
         source = OnnxDepth(model, preset)
     elif s.startswith("stereo:"):
         rest = s[len("stereo:"):]
-        if rest in ("sbs", "sbs:cross"):
+        if rest == "card":
+            source = StereoCardDepth()
+        elif rest in ("sbs", "sbs:cross"):
             source = StereoDepth(None, StereoSettings(cross_eyed=rest == "sbs:cross"), side_by_side=True)
         elif not rest:
             raise InputError("depth", "stereo: needs the right image, e.g. stereo:right.jpg, or stereo:sbs")
