@@ -23,7 +23,7 @@ from ..errors import InputError
 from ..geometry.camera import Cameras
 from ..scene.pointcloud import PointCloud, PointTensors
 from .holes import fill_holes
-from .rasterize import RasterSettings
+from .rasterize import Fragments, RasterSettings
 from .rasterizer import PointRasterizer
 
 
@@ -105,9 +105,10 @@ class PlainRenderer:
     def num_points(self) -> int:
         return int(self._xyz.shape[0])
 
-    def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False) -> np.ndarray:
-        """One frame (H, W, 3) float32 in [0, 1] seen by the single camera ``camera``;
-        ``preview`` rasterizes only :func:`preview_point_count` of the points."""
+    def rasterize(self, camera: Cameras, height: int, width: int, *, preview: bool = False) -> Fragments:
+        """The point colours rasterized by the single camera ``camera`` before hole filling
+        (``Fragments.hole`` marks the pixels no point covered); ``preview`` rasterizes only
+        :func:`preview_point_count` of the points."""
         keep = self.num_points
         if preview:
             keep = preview_point_count(keep, height, width, self.settings.preview_points_per_pixel)
@@ -116,7 +117,13 @@ class PlainRenderer:
             depth_tolerance=self.settings.depth_tolerance, supersample=self.settings.supersample,
         )
         with torch.inference_mode():
-            frags = PointRasterizer(raster)(self._xyz[:keep], self._rgb[:keep], camera)
+            return PointRasterizer(raster)(self._xyz[:keep], self._rgb[:keep], camera)
+
+    def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False) -> np.ndarray:
+        """One frame (H, W, 3) float32 in [0, 1] seen by the single camera ``camera``: the
+        :meth:`rasterize` result with its holes filled."""
+        frags = self.rasterize(camera, height, width, preview=preview)
+        with torch.inference_mode():
             image = fill_holes(frags.image, frags.hole).clamp_(0.0, 1.0)  # (3, H, W), never NaN
         return image.permute(1, 2, 0).contiguous().numpy()
 
