@@ -27,9 +27,8 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Iterator, List, Tuple
+from typing import List, Tuple
 
-import cv2
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -40,29 +39,11 @@ from stylize3d_core.geometry.camera import Cameras  # noqa: E402
 from stylize3d_core.geometry.camera_range import (  # noqa: E402
     CameraRange, clamp_dolly, range_corner_poses, trajectory_extreme_cameras,
 )
-from stylize3d_core.io.images import load_image  # noqa: E402
 from stylize3d_core.render.plain import PlainRenderer, PlainRenderSettings, frame_size  # noqa: E402
 from stylize3d_core.scene.photo3d import Photo3D, Photo3DSettings  # noqa: E402
 
-SKIMAGE_PHOTOS = ("stereo_motorcycle", "camera", "coins")
-"""Real photos shipped with scikit-image (not in the repository's samples)."""
-
-
-def test_photos(size: int) -> Iterator[Tuple[str, np.ndarray]]:
-    """(name, (H, W, 3) float32 photo with long side ``size``)."""
-    for path in sorted((ROOT / "assets" / "samples").glob("*.jpg")):
-        yield path.stem, load_image(str(path), max_size=size).rgb
-    import skimage.data
-
-    for name in SKIMAGE_PHOTOS:
-        img = getattr(skimage.data, name)()
-        img = img[0] if isinstance(img, tuple) else img
-        img = np.repeat(img[..., None], 3, axis=2) if img.ndim == 2 else img[..., :3]
-        scale = size / max(img.shape[:2])
-        img = cv2.resize(img, (round(img.shape[1] * scale), round(img.shape[0] * scale)),
-                         interpolation=cv2.INTER_AREA)
-        yield name, img.astype(np.float32) / 255.0
-
+sys.path.insert(1, str(ROOT / "benchmarks"))
+from photos import estimate_depth, test_photos  # noqa: E402
 
 def full_dolly(rng: CameraRange, centre_depth: float, near_depth: float) -> np.ndarray:
     """(4, 4) ``cam_to_world`` of the range's full forward dolly (clamped by the near margin)."""
@@ -100,7 +81,7 @@ def main() -> None:
           f"{'viewer max %':>12} {'fwd dolly %':>11} {'traj max %':>10} {'full dolly %':>12}")
     worst = 0.0
     for name, rgb in test_photos(args.size):
-        depth = depth_source.estimate(rgb)
+        depth = estimate_depth(depth_source, rgb)
         p3d = Photo3D.build(rgb, depth, Photo3DSettings())
         rng = CameraRange() if args.range == "default" else p3d.camera_range
         viewer, traj, dolly = hole_shares(p3d, rng, args.size, grow=not args.bilinear)
