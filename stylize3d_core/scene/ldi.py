@@ -132,7 +132,7 @@ class LDISettings:
     """Relative margin added to the parallax when sizing the hidden layer."""
     hidden_margin_px: float = 2.0
     """Margin in pixels added to the sized hidden layer and border."""
-    edge_exclusion_px: int = 2
+    edge_exclusion_px: int = 1
     """Pixels this close to a tear (either side) never give colour to the hidden layer: they
     hold anti-aliased mixtures of foreground and background (and absorb small misalignments
     of the depth edge with the colour edge)."""
