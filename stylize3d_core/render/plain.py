@@ -44,8 +44,9 @@ class PlainRenderSettings:
             moving in shows surfaces rather than a grid of points; a preview's subset grows
             them by ``sqrt(N / kept)``. Needs a :class:`PointCloud` (photo size and FOV);
             False: bilinear splats.
-        soft_edges: True (default): silhouettes keep their size and are anti-aliased
-            (``RasterSettings.soft_edges``); False: every splat tap can occlude.
+        soft_edges: True (default): silhouettes keep their size however large the splats
+            grow (``RasterSettings.soft_edges``); False: every splat tap can occlude, and a
+            grown splat's faint fringe can hide the surface behind it.
     """
 
     supersample: int = 1

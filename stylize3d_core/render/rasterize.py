@@ -93,12 +93,14 @@ class RasterSettings:
         near_clip: points with ``z <= near_clip`` (scene units) are culled.
             Default 1e-3, 1/333 of the normalised near depth 1/3. Finite and > 0.
         soft_edges: False (default): a (sub-)pixel's front depth is the least depth of
-            every contribution it receives. True: only *core* contributions
-            (weight >= :data:`CORE_WEIGHT` / half-width^2, which every point gives to
-            at least the pixel nearest it) set the front, where there is one; the thin
-            fringe of a nearer surface's splats then blends with the surface behind
-            instead of hiding it, so silhouettes keep their size (no outline grown by
-            the splat) and are anti-aliased.
+            every contribution it receives. True: only *core* contributions (every
+            bilinear one, and a grown splat's taps of weight >= :data:`CORE_WEIGHT` /
+            half-width^2, which it gives to at least the pixel nearest it) set the
+            front, where there is one, and
+            contributions nearer than the front band are dropped: the thin fringe of a
+            nearer surface's splats gives way to the surface behind instead of hiding it
+            (or, below the hole threshold, leaving a hole), so silhouettes keep their
+            size however large the splats grow.
     """
 
     height: int
@@ -147,6 +149,9 @@ class Fragments(NamedTuple):
 CORE_WEIGHT = 0.24
 """With ``soft_edges``, a tap whose weight is at least this (divided by the splat's
 squared half-width) sets its pixel's front depth: the tap nearest a point weighs >= 1/4."""
+
+_GROWN = 1.0 + 1e-3
+"""A footprint below this many pixels is splatted bilinearly (rounding must not add taps)."""
 
 MAX_SPLAT_SCALE = 4.0
 """Largest splat half-width, in (sub-)pixels: a point magnified more covers at most 8 x 8 pixels."""
@@ -228,7 +233,7 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
         # the footprint in *output* pixels: with supersampling, the bilinear sub-pixel splats
         # already cover a point spacing of s sub-pixels (pooling and visibility splatting)
         half = (K[0, 0].abs().to(dtype) * size / z.abs().clamp_min(1e-12)).nan_to_num(1.0)
-        half = half.clamp(1.0, MAX_SPLAT_SCALE)
+        half = torch.where(half < _GROWN, 1.0, half.clamp(max=MAX_SPLAT_SCALE))  # ~1 stays bilinear
     # NaN fails every comparison; an infinite x or y gives an infinite a or b.
     inside = (z > settings.near_clip) & (z < math.inf) & (a > -half) & (a < Ws - 1 + half)
     inside &= (b > -half) & (b < Hs - 1 + half)
@@ -265,7 +270,7 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
         zbuf.scatter_reduce_(0, q.reshape(-1), torch.where(ok, zg, math.inf).reshape(-1), reduce="amin")
         if settings.soft_edges:
             hg = half if sel is None else half.index_select(0, sel)
-            core = ok & (w >= CORE_WEIGHT / (hg * hg))  # (T, Mg)
+            core = ok & ((w >= CORE_WEIGHT / (hg * hg)) | (hg == 1.0))  # (T, Mg): bilinear taps all are
             zcore.scatter_reduce_(0, q.reshape(-1), torch.where(core, zg, math.inf).reshape(-1), reduce="amin")
     front_buf = torch.where(zcore < math.inf, zcore, zbuf) if settings.soft_edges else zbuf
     if s == 2:
@@ -280,6 +285,8 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
     for sel, w, ok, q, xi, yi, zg in parts:
         front = near.index_select(0, q.reshape(-1)).view_as(q)  # (T, Mg)
         keep = (zg <= front * (1.0 + settings.depth_tolerance)) & ok  # (T, Mg)
+        if settings.soft_edges:  # a nearer surface's fringe gives way to the core-set front
+            keep &= zg * (1.0 + settings.depth_tolerance) >= front
         o = yi * W + xi if s == 1 else (yi >> 1) * W + (xi >> 1)  # output pixel of each tap
         pixel.append(torch.where(keep, o, 0).reshape(-1))
         weight.append(torch.where(keep, w, 0.0).reshape(-1))

@@ -59,7 +59,8 @@ def rasterize_points_reference(
         if z <= settings.near_clip:
             continue
         # half-width of the tent: 1 (bilinear), or the point's footprint in raster pixels
-        half = 1.0 if size is None else min(MAX_SPLAT_SCALE, max(1.0, fx / s * size / z))  # output pixels
+        half = 1.0 if size is None else min(MAX_SPLAT_SCALE, fx / s * size / z)  # output pixels
+        half = 1.0 if half < 1.0 + 1e-3 else half  # bilinear
         a = fx * x / z + cx - 0.5
         b = fy * y / z + cy - 0.5
         if not (-half < a < Ws - 1 + half and -half < b < Hs - 1 + half):
@@ -75,7 +76,7 @@ def rasterize_points_reference(
             for j, wx in cols:
                 w = wx * wy
                 if w > 0 and 0 <= i < Hs and 0 <= j < Ws:
-                    received[(i, j)].append((n, w, z, w >= CORE_WEIGHT / half**2))
+                    received[(i, j)].append((n, w, z, half == 1.0 or w >= CORE_WEIGHT / half**2))
 
     # 2. Z-buffer per sub-pixel, keep the front surface, pool into output pixels.
     A = torch.zeros(H * W, N, dtype=torch.float64)
@@ -93,6 +94,8 @@ def rasterize_points_reference(
         p = (i // s) * W + (j // s)
         depth[p] = min(float(depth[p]), own_min[(i, j)])
         for n, w, z, _ in contributions:
+            if settings.soft_edges and z * (1.0 + settings.depth_tolerance) < zmin:
+                continue  # a nearer surface's fringe gives way to the core-set front
             if z <= zmin * (1.0 + settings.depth_tolerance):
                 A[p, n] += w
                 wsum[p] += w

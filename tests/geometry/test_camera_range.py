@@ -23,9 +23,10 @@ def test_corners_reach_the_limits_and_respect_the_near_margin():
     assert poses.shape == (18, 4, 4)
     z_max = (1 - rng.near_margin) * NEAR_DEPTH
     assert (poses[:, 2, 3] <= z_max + 1e-9).all()
-    # the left/right corners combine full yaw and full pan: |x| = pan + centre * sin(yaw) (up to dolly)
+    # the right corner combines full yaw and full pan: x = pan cos(yaw) + centre sin(yaw)
     straight = orbit_cam_to_world(-rng.max_yaw_deg, 0, rng.max_pan, 0, 0.0, centre)
-    assert straight[0, 3] == pytest.approx(rng.max_pan + centre * math.sin(math.radians(rng.max_yaw_deg)))
+    a = math.radians(rng.max_yaw_deg)
+    assert straight[0, 3] == pytest.approx(rng.max_pan * math.cos(a) + centre * math.sin(a))
     assert np.abs(poses[:, 0, 3]).max() >= rng.max_pan
     for T in poses:
         np.testing.assert_allclose(T[:3, :3].T @ T[:3, :3], np.eye(3), atol=1e-12)

@@ -461,13 +461,18 @@ def test_soft_edges_match_reference(supersample, seed):
 
 
 def test_soft_edges_keep_a_silhouette_from_growing(raster):
-    """A front point whose splat only grazes a background pixel (weight 0.1) hides it by
-    default; with soft edges the background pixel keeps its own colour, mixed with the fringe."""
-    K = simple_K(4, 4)
-    pts = torch.tensor([point_at(1.5, 1.5, 2.0, K), point_at(2.4, 1.5, 1.0, K)], dtype=F64)  # back, front
+    """A grown front splat whose fringe grazes a background pixel hides it by default; with
+    soft edges the background pixel keeps its own colour (bilinear splats are unchanged)."""
+    K = simple_K(6, 6)
+    pts = torch.tensor([point_at(1.5, 2.5, 2.0, K), point_at(3.9, 2.5, 1.0, K)], dtype=F64)  # back, front
     feats = torch.tensor([[0.0], [1.0]], dtype=F64)
-    hard = raster(pts, feats, K, RasterSettings(4, 4))
-    soft = raster(pts, feats, K, RasterSettings(4, 4, soft_edges=True))
-    assert float(hard.image[0, 1, 1]) == pytest.approx(1.0)  # the front's 0.1 fringe hides the back
-    assert float(soft.image[0, 1, 1]) == pytest.approx(0.1 / 1.1)  # blended: 0.1 front, 1.0 back
-    assert float(soft.image[0, 1, 2]) == pytest.approx(1.0)  # the front's core pixel stays the front
+    size = footprint(pts, K, torch.tensor([1.0, 2.5], dtype=F64))  # the front covers 2.5 px
+    hard = raster(pts, feats, K, RasterSettings(6, 6), point_size=size)
+    soft = raster(pts, feats, K, RasterSettings(6, 6, soft_edges=True), point_size=size)
+    # pixel (2, 1): the back point's own pixel, 2.4 px from the front point (fringe weight > 0)
+    assert float(hard.weight[2, 1]) > 0 and float(hard.image[0, 2, 1]) == pytest.approx(1.0)
+    assert float(soft.image[0, 2, 1]) == pytest.approx(0.0)
+    assert float(soft.image[0, 2, 3]) == pytest.approx(1.0)  # the front's core pixels stay the front
+    plain = raster(pts, feats, K, RasterSettings(6, 6))
+    plain_soft = raster(pts, feats, K, RasterSettings(6, 6, soft_edges=True))
+    torch.testing.assert_close(plain.image, plain_soft.image)
