@@ -3,7 +3,9 @@
 Prints the median build time of :func:`build_ldi` (and of :func:`ldi_to_points`)
 for a depth map with discontinuities (a disc and a box in front of a slanted
 wall: edges, islands, hidden layer) and for a discontinuity-free one (the same
-wall alone: the hidden-layer step is skipped), with the number of points.
+wall alone: the hidden-layer step is skipped), with the number of points, the
+widest hidden layer, the border and the covered fraction of the camera range
+(all sized for the default camera range and trajectories).
 
 Run from the repository root: ``.venv/bin/python -m benchmarks.bench_ldi [--repeats 5]``
 """
@@ -47,7 +49,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5, help="runs per measurement (median reported)")
     args = parser.parse_args()
     print(f"{'size':>11} {'MP':>5} {'depth':>14} {'build_ldi s':>12} {'to_points s':>12} "
-          f"{'inpainted':>9} {'hidden px':>10} {'points':>10}")
+          f"{'inpainted':>9} {'hidden px':>10} {'points':>10} {'width px':>8} {'pad':>4} {'range':>5}")
     for h, w in SIZES:
         for edges in (True, False):
             rgb, depth = synthetic_photo(h, w, edges)
@@ -57,7 +59,8 @@ def main() -> None:
             n = len(ldi_to_points(ldi, 60.0))
             kind = "discontinuous" if edges else "smooth"
             print(f"{h:>5}x{w:<5} {h * w / 1e6:5.2f} {kind:>14} {t_ldi:12.3f} {t_pts:12.3f} "
-                  f"{str(ldi.inpainted):>9} {int(ldi.hidden_mask.sum()):>10} {n:>10}")
+                  f"{str(ldi.inpainted):>9} {int(ldi.hidden_mask.sum()):>10} {n:>10} "
+                  f"{ldi.hidden_width:8.1f} {ldi.pad:>4} {ldi.range_scale:5.2f}")
 
 
 if __name__ == "__main__":

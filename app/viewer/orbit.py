@@ -35,47 +35,55 @@ import numpy as np
 from stylize3d_core.checks import check_range
 from stylize3d_core.errors import InputError
 from stylize3d_core.geometry.camera import NEAR_DEPTH, Cameras, check_fov
+from stylize3d_core.geometry.camera_range import CameraRange, clamp_dolly, orbit_cam_to_world
+from stylize3d_core.geometry.camera_range import rotation as rotation  # re-exported
+
+_RANGE = CameraRange()
 
 DragMode = Literal["orbit", "pan"]
 
 
 @dataclass(frozen=True)
 class OrbitLimits:
-    """How far the camera may leave the input view.
+    """How far the camera may leave the input view, and how fast input moves it.
+
+    The range fields mirror :class:`~stylize3d_core.geometry.camera_range.CameraRange`
+    (the library's definition, which the layered depth image is sized for; a
+    photo's ``Photo3D.camera_range`` is the part of it the photo shows cleanly:
+    pass it to :meth:`from_range`).
 
     Attributes:
-        max_yaw_deg: largest turn left/right about the centre, degrees. Default 8 (beyond it
-            the torn edges, the inpainted background and the extended border of a single
-            photo dominate the view).
-        max_pitch_deg: largest turn up/down about the centre, degrees. Default 5.
-        max_pan: largest sideways/vertical shift in the camera plane, scene units. Default 0.1
-            (30 % of the near depth).
-        min_dolly: farthest move backwards, as a fraction of the centre depth (<= 0). Default -0.3.
-        max_dolly: farthest move forwards, as a fraction of the centre depth (>= 0). Default 0.6.
-        near_margin: the camera centre keeps ``z <= (1 - near_margin) * near_depth``
-            (never past the near surface). Default 0.5.
+        max_yaw_deg, max_pitch_deg, max_pan, min_dolly, max_dolly, near_margin:
+            see :class:`~stylize3d_core.geometry.camera_range.CameraRange` (same defaults).
         deg_per_pixel: orbit degrees per pixel of mouse drag. Default 0.04 (8 degrees in 200 px).
         dolly_per_tick: forward move per wheel step, as a fraction of the centre depth. Default 0.04.
     """
 
-    max_yaw_deg: float = 8.0
-    max_pitch_deg: float = 5.0
-    max_pan: float = 0.1
-    min_dolly: float = -0.3
-    max_dolly: float = 0.6
-    near_margin: float = 0.5
+    max_yaw_deg: float = _RANGE.max_yaw_deg
+    max_pitch_deg: float = _RANGE.max_pitch_deg
+    max_pan: float = _RANGE.max_pan
+    min_dolly: float = _RANGE.min_dolly
+    max_dolly: float = _RANGE.max_dolly
+    near_margin: float = _RANGE.near_margin
     deg_per_pixel: float = 0.04
     dolly_per_tick: float = 0.04
 
     def __post_init__(self) -> None:
-        check_range(self.max_yaw_deg, "max_yaw_deg", 0.0, 80.0)
-        check_range(self.max_pitch_deg, "max_pitch_deg", 0.0, 80.0)
-        check_range(self.max_pan, "max_pan", 0.0, 10.0)
-        check_range(self.min_dolly, "min_dolly", -10.0, 0.0)
-        check_range(self.max_dolly, "max_dolly", 0.0, 1.0, inclusive=True)
-        check_range(self.near_margin, "near_margin", 0.0, 1.0, inclusive=False)
+        self.camera_range()  # validates the range fields
         check_range(self.deg_per_pixel, "deg_per_pixel", 0.0, 10.0)
         check_range(self.dolly_per_tick, "dolly_per_tick", 0.0, 1.0)
+
+    def camera_range(self) -> CameraRange:
+        """The range part of these limits."""
+        return CameraRange(self.max_yaw_deg, self.max_pitch_deg, self.max_pan, self.min_dolly,
+                           self.max_dolly, self.near_margin)
+
+    @staticmethod
+    def from_range(rng: CameraRange, **speeds: float) -> "OrbitLimits":
+        """Limits of the range ``rng`` (e.g. a photo's ``Photo3D.camera_range``); ``speeds``
+        may set ``deg_per_pixel`` and ``dolly_per_tick``."""
+        return OrbitLimits(rng.max_yaw_deg, rng.max_pitch_deg, rng.max_pan, rng.min_dolly,
+                           rng.max_dolly, rng.near_margin, **speeds)
 
 
 @dataclass(frozen=True)
@@ -137,23 +145,9 @@ HOME = OrbitPose()
 """The input view."""
 
 
-def rotation(yaw_deg: float, pitch_deg: float) -> np.ndarray:
-    """``R = R_y(yaw) @ R_x(pitch)`` (3, 3) float64, orthonormal with det 1."""
-    a, b = math.radians(yaw_deg), math.radians(pitch_deg)
-    ry = np.array([[math.cos(a), 0.0, math.sin(a)], [0.0, 1.0, 0.0], [-math.sin(a), 0.0, math.cos(a)]])
-    rx = np.array([[1.0, 0.0, 0.0], [0.0, math.cos(b), -math.sin(b)], [0.0, math.sin(b), math.cos(b)]])
-    return ry @ rx
-
-
 def cam_to_world(pose: OrbitPose, scene: OrbitScene) -> np.ndarray:
     """The (4, 4) float64 ``cam_to_world`` of ``pose`` (see the module docstring)."""
-    R = rotation(pose.yaw_deg, pose.pitch_deg)  # (3, 3)
-    c = np.array([0.0, 0.0, scene.centre_depth])
-    t0 = np.array([pose.pan_x, pose.pan_y, pose.dolly])
-    T = np.eye(4)
-    T[:3, :3] = R
-    T[:3, 3] = c + R @ (t0 - c)
-    return T
+    return orbit_cam_to_world(pose.yaw_deg, pose.pitch_deg, pose.pan_x, pose.pan_y, pose.dolly, scene.centre_depth)
 
 
 def camera_z(pose: OrbitPose, scene: OrbitScene) -> float:
@@ -172,16 +166,8 @@ def clamp_pose(pose: OrbitPose, scene: OrbitScene, limits: OrbitLimits = OrbitLi
     pitch = float(np.clip(pose.pitch_deg, -limits.max_pitch_deg, limits.max_pitch_deg))
     px = float(np.clip(pose.pan_x, -limits.max_pan, limits.max_pan))
     py = float(np.clip(pose.pan_y, -limits.max_pan, limits.max_pan))
-    lo, hi = dolly_range(scene, limits)
-    out = OrbitPose(yaw, pitch, px, py, float(np.clip(pose.dolly, lo, hi)))
-    # The camera's world z grows with dolly at the rate k = R[2, 2] = cos(yaw) cos(pitch) > 0:
-    # pull the dolly back until the camera is at least the margin in front of the near surface.
-    z_max = (1.0 - limits.near_margin) * scene.near_depth
-    z = camera_z(out, scene)
-    if z > z_max:
-        k = math.cos(math.radians(yaw)) * math.cos(math.radians(pitch))
-        out = replace(out, dolly=max(lo, out.dolly - (z - z_max) / k))
-    return out
+    dz = clamp_dolly(yaw, pitch, px, py, pose.dolly, scene.centre_depth, scene.near_depth, limits.camera_range())
+    return OrbitPose(yaw, pitch, px, py, dz)
 
 
 def orbit(pose: OrbitPose, d_yaw_deg: float, d_pitch_deg: float, scene: OrbitScene,

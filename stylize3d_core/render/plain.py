@@ -13,17 +13,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Iterator, Tuple, Union
+from typing import Iterator, Optional, Tuple, Union
 
 import numpy as np
 import torch
 
 from ..checks import check_range
 from ..errors import InputError
-from ..geometry.camera import Cameras
+from ..geometry.camera import Cameras, focal_from_fov
 from ..scene.pointcloud import PointCloud, PointTensors
 from .holes import fill_holes
-from .rasterize import RasterSettings
+from .rasterize import Fragments, RasterSettings
 from .rasterizer import PointRasterizer
 
 
@@ -39,12 +39,22 @@ class PlainRenderSettings:
         depth_tolerance: relative depth band of the front surface (see RasterSettings).
         preview_points_per_pixel: points a preview rasterizes per output pixel. Default 2.
         seed: seed of the random point order that previews take a prefix of.
+        grow_splats: True (default): each point's splat covers its photo pixel's footprint
+            in the view (``point_size = z / f_photo``, see ``render/rasterize.py``), so
+            moving in shows surfaces rather than a grid of points; a preview's subset grows
+            them by ``sqrt(N / kept)``. Needs a :class:`PointCloud` (photo size and FOV);
+            False: bilinear splats.
+        soft_edges: True (default): silhouettes keep their size however large the splats
+            grow (``RasterSettings.soft_edges``); False: every splat tap can occlude, and a
+            grown splat's faint fringe can hide the surface behind it.
     """
 
     supersample: int = 1
     depth_tolerance: float = 0.02
     preview_points_per_pixel: float = 2.0
     seed: int = 0
+    grow_splats: bool = True
+    soft_edges: bool = True
 
     def __post_init__(self) -> None:
         if self.supersample not in (1, 2):
@@ -99,24 +109,39 @@ class PlainRenderer:
         order = random_order(t.xyz.shape[0], settings.seed)
         self._xyz = t.xyz.index_select(0, order)  # (N, 3)
         self._rgb = t.rgb.index_select(0, order)  # (N, 3)
+        self._size: Optional[torch.Tensor] = None  # (N,) footprint of each point, scene units
+        if settings.grow_splats and isinstance(points, PointCloud):
+            f = focal_from_fov(points.fov_y_deg, points.image_size[0])
+            self._size = self._xyz[:, 2].abs() / f
         self.settings = settings
 
     @property
     def num_points(self) -> int:
         return int(self._xyz.shape[0])
 
-    def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False) -> np.ndarray:
-        """One frame (H, W, 3) float32 in [0, 1] seen by the single camera ``camera``;
-        ``preview`` rasterizes only :func:`preview_point_count` of the points."""
+    def rasterize(self, camera: Cameras, height: int, width: int, *, preview: bool = False) -> Fragments:
+        """The point colours rasterized by the single camera ``camera`` before hole filling
+        (``Fragments.hole`` marks the pixels no point covered); ``preview`` rasterizes only
+        :func:`preview_point_count` of the points."""
         keep = self.num_points
         if preview:
             keep = preview_point_count(keep, height, width, self.settings.preview_points_per_pixel)
         raster = RasterSettings(
             height=int(height), width=int(width),
             depth_tolerance=self.settings.depth_tolerance, supersample=self.settings.supersample,
+            soft_edges=self.settings.soft_edges,
         )
+        size = None
+        if self._size is not None:
+            size = self._size[:keep] * math.sqrt(self.num_points / max(keep, 1))
         with torch.inference_mode():
-            frags = PointRasterizer(raster)(self._xyz[:keep], self._rgb[:keep], camera)
+            return PointRasterizer(raster)(self._xyz[:keep], self._rgb[:keep], camera, size)
+
+    def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False) -> np.ndarray:
+        """One frame (H, W, 3) float32 in [0, 1] seen by the single camera ``camera``: the
+        :meth:`rasterize` result with its holes filled."""
+        frags = self.rasterize(camera, height, width, preview=preview)
+        with torch.inference_mode():
             image = fill_holes(frags.image, frags.hole).clamp_(0.0, 1.0)  # (3, H, W), never NaN
         return image.permute(1, 2, 0).contiguous().numpy()
 

@@ -12,6 +12,16 @@ four pixels gets the product. A point exactly at a pixel centre lands on that
 pixel alone (weight 1); a point at a pixel corner gives 0.25 to each of four.
 Contributions with zero weight, or outside the image, are dropped.
 
+Grown splats (``point_size`` given): a point that stands for a patch of side
+``size`` (scene units, at its depth; ``z / f_photo`` for one point per photo
+pixel) covers ``k = f * size / z`` output pixels of this view. Where the view magnifies
+(``k > 1``: moving in, zooming in, a finer image than the photo) the splat is a
+separable tent of half-width ``k`` raster (sub-)pixels (capped at
+:data:`MAX_SPLAT_SCALE`) instead of ``1``, over the ``2 ceil(k)`` columns and rows nearest the point, with weights
+``max(0, 1 - |d| / k)`` normalised to sum to 1 per axis; so neighbouring points
+still overlap and a magnified surface shows no gaps. With ``k <= 1`` (and
+without sizes) the splat is the bilinear one above, which is the tent with ``k = 1``.
+
 Z-buffer ("bilinear splat among the front-most surface"): per pixel, ``zmin`` is
 the smallest depth among the contributions it receives. Only contributions with
 ``z <= zmin * (1 + depth_tolerance)`` are kept, so the points of one surface
@@ -49,7 +59,7 @@ from __future__ import annotations
 import math
 import numbers
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import NamedTuple, Optional
 
 import torch
 import torch.nn.functional as F
@@ -82,6 +92,15 @@ class RasterSettings:
             least a thousandth is shown. Finite and > 0.
         near_clip: points with ``z <= near_clip`` (scene units) are culled.
             Default 1e-3, 1/333 of the normalised near depth 1/3. Finite and > 0.
+        soft_edges: False (default): a (sub-)pixel's front depth is the least depth of
+            every contribution it receives. True: only *core* contributions (every
+            bilinear one, and a grown splat's taps of weight >= :data:`CORE_WEIGHT` /
+            half-width^2, which it gives to at least the pixel nearest it) set the
+            front, where there is one, and
+            contributions nearer than the front band are dropped: the thin fringe of a
+            nearer surface's splats gives way to the surface behind instead of hiding it
+            (or, below the hole threshold, leaving a hole), so silhouettes keep their
+            size however large the splats grow.
     """
 
     height: int
@@ -90,6 +109,7 @@ class RasterSettings:
     supersample: int = 1
     hole_weight_threshold: float = 1e-3
     near_clip: float = 1e-3
+    soft_edges: bool = False
 
     def __post_init__(self) -> None:
         for name in ("height", "width", "supersample"):
@@ -126,17 +146,35 @@ class Fragments(NamedTuple):
     hole: torch.Tensor
 
 
+CORE_WEIGHT = 0.24
+"""With ``soft_edges``, a tap whose weight is at least this (divided by the splat's
+squared half-width) sets its pixel's front depth: the tap nearest a point weighs >= 1/4."""
+
+_GROWN = 1.0 + 1e-3
+"""A footprint below this many pixels is splatted bilinearly (rounding must not add taps)."""
+
+MAX_SPLAT_SCALE = 4.0
+"""Largest splat half-width, in (sub-)pixels: a point magnified more covers at most 8 x 8 pixels."""
+
+
 class _Splats(NamedTuple):
-    """The 4 corner contributions of the M points that survive culling, corner-major."""
+    """The tap contributions of the M points that survive culling, as flat (E,) entries.
+
+    With one tap count for every point (``taps`` > 0, always so without point sizes),
+    the entries are tap-major: entry ``t * M + m`` is tap ``t`` of surviving point ``m``.
+    """
 
     point: torch.Tensor  # (M,) int64 index of each surviving point into the features
-    pixel: torch.Tensor  # (4, M) int64 output pixel i * W + j of each corner, 0 where not kept
-    weight: torch.Tensor  # (4, M) bilinear weight of each corner, 0 where not kept
-    kept: torch.Tensor  # (4, M) bool, the corner survived the z-buffer test
+    entry_point: torch.Tensor  # (E,) int64 feature row of each entry
+    pixel: torch.Tensor  # (E,) int64 output pixel i * W + j of each entry, 0 where not kept
+    weight: torch.Tensor  # (E,) splat weight of each entry, 0 where not kept
+    kept: torch.Tensor  # (E,) bool, the entry survived the z-buffer test
     depth: torch.Tensor  # (H, W) front-most depth, +inf where nothing landed
+    taps: int  # taps per point when uniform, else 0
 
 
-def _check_inputs(points_cam: torch.Tensor, features: torch.Tensor, K: torch.Tensor, settings) -> None:
+def _check_inputs(points_cam: torch.Tensor, features: torch.Tensor, K: torch.Tensor, settings,
+                  point_size=None) -> None:
     if not isinstance(settings, RasterSettings):
         raise InputError("settings", f"expected RasterSettings, got {type(settings).__name__}")
     for name, t in (("points_cam", points_cam), ("features", features), ("K", K)):
@@ -157,6 +195,12 @@ def _check_inputs(points_cam: torch.Tensor, features: torch.Tensor, K: torch.Ten
         raise InputError("features", f"on {features.device}, points_cam on {points_cam.device}")
     if not torch.isfinite(K).all():
         raise InputError("K", "contains NaN or infinite values")
+    if point_size is not None:
+        if not isinstance(point_size, torch.Tensor) or not point_size.is_floating_point():
+            raise InputError("point_size", "expected a floating-point torch.Tensor")
+        check_shape(point_size, "point_size", (points_cam.shape[0],))
+        if point_size.device != points_cam.device:
+            raise InputError("point_size", f"on {point_size.device}, points_cam on {points_cam.device}")
     # One reduction is far cheaper than an element-wise test; a non-finite sum is
     # only a hint (it can also overflow), confirmed by the exact test.
     with torch.no_grad():
@@ -165,11 +209,12 @@ def _check_inputs(points_cam: torch.Tensor, features: torch.Tensor, K: torch.Ten
 
 
 @torch.no_grad()
-def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings) -> _Splats:
+def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, point_size=None) -> _Splats:
     """Cull, splat and z-buffer: everything but the feature accumulation.
 
-    Per-corner arrays are (4, M), corner-major (00, 01, 10, 11 as (dy, dx)):
-    element-wise work on contiguous rows is several times faster than on (M, 4).
+    Per-tap arrays are (T, M) per group of points with the same tap count
+    (rows are taps): element-wise work on contiguous rows is several times
+    faster than on (M, T).
     """
     s = settings.supersample
     H, W = settings.height, settings.width
@@ -181,55 +226,82 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings) 
     Ks[:2] *= s  # (3, 3) intrinsics of the sub-pixel raster
     uv, z = project(pts, Ks)  # (N, 2), (N,)
     a, b = uv[:, 0] - 0.5, uv[:, 1] - 0.5  # (N,) integers at pixel centres
+    if point_size is None:
+        half = torch.ones_like(z)  # (N,) splat half-width in raster pixels: bilinear
+    else:
+        size = point_size.detach().to(device=dev, dtype=dtype)
+        # the footprint in *output* pixels: with supersampling, the bilinear sub-pixel splats
+        # already cover a point spacing of s sub-pixels (pooling and visibility splatting)
+        half = (K[0, 0].abs().to(dtype) * size / z.abs().clamp_min(1e-12)).nan_to_num(1.0)
+        half = torch.where(half < _GROWN, 1.0, half.clamp(max=MAX_SPLAT_SCALE))  # ~1 stays bilinear
     # NaN fails every comparison; an infinite x or y gives an infinite a or b.
-    inside = (z > settings.near_clip) & (z < math.inf) & (a > -1) & (a < Ws) & (b > -1) & (b < Hs)
+    inside = (z > settings.near_clip) & (z < math.inf) & (a > -half) & (a < Ws - 1 + half)
+    inside &= (b > -half) & (b < Hs - 1 + half)
     idx = inside.nonzero().squeeze(1)  # (M,) surviving points, ascending
-    a, b, z = a.index_select(0, idx), b.index_select(0, idx), z.index_select(0, idx)  # (M,)
-    x0f, y0f = a.floor(), b.floor()
-    fx, fy = a - x0f, b - y0f
-    gx, gy = 1.0 - fx, 1.0 - fy
-    x0, y0 = x0f.long(), y0f.long()  # (M,) in [-1, Ws - 1], [-1, Hs - 1]
-    w4 = torch.stack([gx * gy, fx * gy, gx * fy, fx * fy])  # (4, M)
+    a, b, z, half = (t.index_select(0, idx) for t in (a, b, z, half))  # (M,)
+    reach = half.ceil().long()  # (M,) taps per side of the point, per axis
+    groups = [None] if point_size is None else [int(r) for r in torch.unique(reach).tolist()]
 
-    # Z-buffer on a raster padded by one pixel on each side, so that no corner
-    # needs a bounds test: the padding holds -inf, which keeps nothing there.
-    # Zero-weight corners (a point exactly on a pixel centre row or column) do
-    # not take part: their depth is +inf.
-    Wp = Ws + 2
-    q = y0 * Wp + x0 + (Wp + 1)  # (M,) padded index of corner 00
-    q4 = (q + torch.tensor([[0], [1], [Wp], [Wp + 1]], device=dev)).view(-1)  # (4M,)
-    positive = w4 > 0  # (4, M)
-    z4 = torch.where(positive, z, math.inf)  # (4, M)
-    zbuf = torch.full((Hs + 2, Wp), -math.inf, dtype=dtype, device=dev)
-    zbuf[1:-1, 1:-1] = math.inf
-    zbuf = zbuf.view(-1)
-    zbuf.scatter_reduce_(0, q4, z4.view(-1), reduce="amin")
+    # Per group: taps, weights and raster indices (flat, unpadded; outside taps have weight 0).
+    parts = []
+    for r in groups:
+        sel = None if r is None else (reach == r).nonzero().squeeze(1)  # (Mg,) into the survivors
+        r = 1 if r is None else r
+        ag, bg_, zg, hg = (t if sel is None else t.index_select(0, sel) for t in (a, b, z, half))
+        x0f, y0f = ag.floor(), bg_.floor()
+        offs = torch.arange(1 - r, r + 1, device=dev, dtype=dtype)  # (2r,) tap offsets per axis
+        xs, ys = x0f + offs[:, None], y0f + offs[:, None]  # (2r, Mg)
+        wx = (1.0 - (xs - ag).abs() / hg).clamp_min(0.0)  # (2r, Mg) tent of half-width hg
+        wy = (1.0 - (ys - bg_).abs() / hg).clamp_min(0.0)
+        if r > 1:  # every point deposits a total weight of 1 (the bilinear weights already do)
+            wx = wx / wx.sum(0, keepdim=True)
+            wy = wy / wy.sum(0, keepdim=True)
+        T, Mg = 4 * r * r, ag.shape[0]
+        w = (wy[:, None] * wx[None]).reshape(T, Mg)  # (T, Mg), row = dy * 2r + dx
+        xi = xs.long()[None].expand(2 * r, -1, -1).reshape(T, Mg)  # (T, Mg)
+        yi = ys.long()[:, None].expand(-1, 2 * r, -1).reshape(T, Mg)
+        ok = (w > 0) & (xi >= 0) & (xi < Ws) & (yi >= 0) & (yi < Hs)
+        q = torch.where(ok, yi * Ws + xi, 0)  # (T, Mg) raster index
+        parts.append((sel, w, ok, q, xi, yi, zg))
+
+    zbuf = torch.full((Hs * Ws,), math.inf, dtype=dtype, device=dev)
+    zcore = torch.full((Hs * Ws,), math.inf, dtype=dtype, device=dev) if settings.soft_edges else zbuf
+    for sel, w, ok, q, _, _, zg in parts:
+        zbuf.scatter_reduce_(0, q.reshape(-1), torch.where(ok, zg, math.inf).reshape(-1), reduce="amin")
+        if settings.soft_edges:
+            hg = half if sel is None else half.index_select(0, sel)
+            core = ok & ((w >= CORE_WEIGHT / (hg * hg)) | (hg == 1.0))  # (T, Mg): bilinear taps all are
+            zcore.scatter_reduce_(0, q.reshape(-1), torch.where(core, zg, math.inf).reshape(-1), reduce="amin")
+    front_buf = torch.where(zcore < math.inf, zcore, zbuf) if settings.soft_edges else zbuf
     if s == 2:
         # Visibility splatting: a sub-pixel's front is the nearest depth in its 3 x 3
         # neighbourhood, so a surface behind cannot show through the gaps between
         # the 2 x 2 splats of a front surface (they are 2 sub-pixels apart).
-        zin = zbuf.view(Hs + 2, Wp)[1:-1, 1:-1]
-        near = -F.max_pool2d(-zin[None, None], 3, stride=1, padding=1)[0, 0]  # (Hs, Ws)
-        zfront = torch.full((Hs + 2, Wp), -math.inf, dtype=dtype, device=dev)
-        zfront[1:-1, 1:-1] = near
-        front = zfront.view(-1).index_select(0, q4).view(4, -1)  # (4, M)
+        near = -F.max_pool2d(-front_buf.view(1, 1, Hs, Ws), 3, stride=1, padding=1).view(-1)  # (Hs * Ws,)
     else:
-        front = zbuf.index_select(0, q4).view(4, -1)  # (4, M)
-    kept = (z4 <= front * (1.0 + settings.depth_tolerance)) & positive  # (4, M)
+        near = front_buf
 
-    # Output pixel of each corner: sub-pixel // s.
-    if s == 1:
-        o4 = y0 * W + x0 + torch.tensor([[0], [1], [W], [W + 1]], device=dev)  # (4, M)
-    else:
-        ox0, ox1, oy0, oy1 = x0 >> 1, (x0 + 1) >> 1, (y0 >> 1) * W, ((y0 + 1) >> 1) * W
-        o4 = torch.stack([oy0 + ox0, oy0 + ox1, oy1 + ox0, oy1 + ox1])  # (4, M)
-    o4 = torch.where(kept, o4, 0)
-    w4 = torch.where(kept, w4, 0.0)
-
-    depth = zbuf.view(Hs + 2, Wp)[1:-1, 1:-1]  # (Hs, Ws)
+    entry_point, pixel, weight, kept = [], [], [], []
+    for sel, w, ok, q, xi, yi, zg in parts:
+        front = near.index_select(0, q.reshape(-1)).view_as(q)  # (T, Mg)
+        keep = (zg <= front * (1.0 + settings.depth_tolerance)) & ok  # (T, Mg)
+        if settings.soft_edges:  # a nearer surface's fringe gives way to the core-set front
+            keep &= zg * (1.0 + settings.depth_tolerance) >= front
+        o = yi * W + xi if s == 1 else (yi >> 1) * W + (xi >> 1)  # output pixel of each tap
+        pixel.append(torch.where(keep, o, 0).reshape(-1))
+        weight.append(torch.where(keep, w, 0.0).reshape(-1))
+        kept.append(keep.reshape(-1))
+        rows = idx if sel is None else idx.index_select(0, sel)
+        entry_point.append(rows.repeat(w.shape[0]))  # tap-major, as the (T, Mg) rows
+    depth = zbuf.view(Hs, Ws)
     if s == 2:
         depth = depth.reshape(H, 2, W, 2).amin(dim=(1, 3))
-    return _Splats(idx, o4, w4, kept, depth.clone())
+    taps = parts[0][1].shape[0] if len(parts) == 1 else 0
+    if len(parts) == 0:
+        taps = 4
+    cat = (lambda xs, like: torch.cat(xs) if xs else torch.zeros(0, dtype=like, device=dev))
+    return _Splats(idx, cat(entry_point, torch.long), cat(pixel, torch.long), cat(weight, dtype),
+                   cat(kept, torch.bool), depth.clone(), taps)
 
 
 def _bag_sum(index: torch.Tensor, table: torch.Tensor, offsets: torch.Tensor, weights: torch.Tensor):
@@ -261,7 +333,8 @@ def _offsets(counts: torch.Tensor, dtype: torch.dtype = torch.long) -> torch.Ten
 
 
 def rasterize_points(
-    points_cam: torch.Tensor, features: torch.Tensor, K: torch.Tensor, settings: RasterSettings
+    points_cam: torch.Tensor, features: torch.Tensor, K: torch.Tensor, settings: RasterSettings,
+    point_size: Optional[torch.Tensor] = None,
 ) -> Fragments:
     """Rasterize points with features into an image (see the module docstring).
 
@@ -272,45 +345,51 @@ def rasterize_points(
         K: (3, 3) finite intrinsics at the output size (H, W) (skew is ignored,
             as in :func:`stylize3d_core.geometry.camera.project`).
         settings: image size, depth tolerance, supersampling, hole threshold, near clip.
+        point_size: optional (N,) footprint of each point, in scene units at its depth
+            (e.g. ``z / f`` for a point per photo pixel): its splat grows with the
+            magnification (see the module docstring). None: bilinear splats.
     Returns:
         :class:`Fragments` ``image (C, H, W), weight (H, W), depth (H, W), hole (H, W)``.
     Raises:
         InputError: on a wrong shape or dtype, a non-finite K or features.
     """
-    _check_inputs(points_cam, features, K, settings)
+    _check_inputs(points_cam, features, K, settings, point_size)
     H, W = settings.height, settings.width
     C = features.shape[1]
     N = points_cam.shape[0]
-    sp = _splat(points_cam, K, settings)
+    sp = _splat(points_cam, K, settings, point_size)
     M = sp.point.shape[0]
     with torch.no_grad():
-        w4 = sp.weight.to(features.dtype)  # (4, M)
-        pix4 = sp.pixel.view(-1)  # (4M,)
+        w_all = sp.weight.to(features.dtype)  # (E,)
+        pix = sp.pixel  # (E,)
         wsum = torch.zeros(H * W, dtype=features.dtype, device=features.device)
-        wsum.index_add_(0, pix4, w4.view(-1))  # (HW,)
+        wsum.index_add_(0, pix, w_all)  # (HW,)
         hole = wsum < settings.hole_weight_threshold  # (HW,)
         inv = torch.where(hole, 0.0, 1.0 / wsum.clamp_min(settings.hole_weight_threshold))  # (HW,)
-        nw4 = w4 * inv.index_select(0, pix4).view(4, M)  # (4, M) weights normalised per pixel, 0 at holes
-        # Pixel-major bags of the kept corners: gather in corner-major order
-        # (cache friendly), then permute once by pixel. int32 sorts and gathers
-        # faster; indices are < 2**28 (MAX_IMAGE_SIDE**2) and N < 2**31.
-        e = sp.kept.view(-1).nonzero().squeeze(1)  # (E,) flat corner-major indices
-        pix_e = pix4.index_select(0, e)  # (E,)
-        pt_e = sp.point.int().repeat(4).index_select(0, e)  # (E,) feature row of each entry
-        w_e = nw4.view(-1).index_select(0, e)  # (E,)
-        order = torch.sort(pix_e.int(), stable=True).indices  # (E,) pixel-major
-        pix_index = pt_e.index_select(0, order)  # (E,) int32
-        pix_weights = w_e.index_select(0, order)  # (E,)
+        nw = w_all * inv.index_select(0, pix)  # (E,) weights normalised per pixel, 0 at holes
+        # Pixel-major bags of the kept entries: gather in tap-major order (cache
+        # friendly), then permute once by pixel. int32 sorts and gathers faster;
+        # indices are < 2**28 (MAX_IMAGE_SIDE**2) and N < 2**31.
+        e = sp.kept.nonzero().squeeze(1)  # (E',) kept entries
+        pix_e = pix.index_select(0, e)  # (E',)
+        pt_e = sp.entry_point.int().index_select(0, e)  # (E',) feature row of each entry
+        w_e = nw.index_select(0, e)  # (E',)
+        order = torch.sort(pix_e.int(), stable=True).indices  # (E',) pixel-major
+        pix_index = pt_e.index_select(0, order)  # (E',) int32
+        pix_weights = w_e.index_select(0, order)  # (E',)
         pix_offsets = _offsets(torch.bincount(pix_e, minlength=H * W), torch.int32)  # (HW + 1,)
     table = features if features.is_contiguous() else features.contiguous()
     if torch.is_grad_enabled() and features.requires_grad:
         with torch.no_grad():
-            # Point-major bags for the gradient: the 4 corners of each surviving
-            # point (weight 0 where not kept), none for culled points.
-            pt_index = sp.pixel.t().reshape(-1)  # (4M,)
-            pt_weights = nw4.t().reshape(-1)  # (4M,)
-            counts = torch.zeros(N, dtype=torch.long, device=features.device)
-            counts[sp.point] = 4
+            # Point-major bags for the gradient: the taps of each surviving point
+            # (weight 0 where not kept), none for culled points.
+            if sp.taps:
+                pt_index = pix.view(sp.taps, M).t().reshape(-1)  # (E,)
+                pt_weights = nw.view(sp.taps, M).t().reshape(-1)
+            else:
+                by_point = torch.sort(sp.entry_point, stable=True).indices  # (E,)
+                pt_index, pt_weights = pix.index_select(0, by_point), nw.index_select(0, by_point)
+            counts = torch.bincount(sp.entry_point, minlength=N)  # (N,)
             pt_offsets = _offsets(counts)  # (N + 1,)
         out = _SparseSplat.apply(table, pix_index, pix_offsets, pix_weights, pt_index, pt_offsets, pt_weights)
     else:

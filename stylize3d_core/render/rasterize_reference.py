@@ -19,11 +19,12 @@ import torch
 
 from ..checks import check_shape
 from ..errors import InputError
-from .rasterize import Fragments, RasterSettings
+from .rasterize import CORE_WEIGHT, MAX_SPLAT_SCALE, Fragments, RasterSettings
 
 
 def rasterize_points_reference(
-    points_cam: torch.Tensor, features: torch.Tensor, K: torch.Tensor, settings: RasterSettings
+    points_cam: torch.Tensor, features: torch.Tensor, K: torch.Tensor, settings: RasterSettings,
+    point_size=None,
 ) -> Fragments:
     """Reference rasterizer: same arguments and result as ``rasterize_points``.
 
@@ -32,6 +33,7 @@ def rasterize_points_reference(
         features: (N, C) features (gradients flow to them).
         K: (3, 3) intrinsics at the output size.
         settings: the raster settings.
+        point_size: optional (N,) footprint of each point in scene units (grown splats).
     Returns:
         Fragments with image (C, H, W), weight (H, W), depth (H, W), hole (H, W),
         computed in float64 and returned in the features' dtype.
@@ -50,35 +52,50 @@ def rasterize_points_reference(
 
     # 1. Splat: sub-pixel (i, j) -> list of (point, weight, depth).
     received = defaultdict(list)
-    for n, (x, y, z) in enumerate(points_cam.detach().double().tolist()):
+    sizes = [None] * N if point_size is None else point_size.detach().double().tolist()
+    for n, ((x, y, z), size) in enumerate(zip(points_cam.detach().double().tolist(), sizes)):
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
             continue
         if z <= settings.near_clip:
             continue
+        # half-width of the tent: 1 (bilinear), or the point's footprint in raster pixels
+        half = 1.0 if size is None else min(MAX_SPLAT_SCALE, fx / s * size / z)  # output pixels
+        half = 1.0 if half < 1.0 + 1e-3 else half  # bilinear
         a = fx * x / z + cx - 0.5
         b = fy * y / z + cy - 0.5
-        if not (-1 < a < Ws and -1 < b < Hs):
+        if not (-half < a < Ws - 1 + half and -half < b < Hs - 1 + half):
             continue
+        r = math.ceil(half)
         x0, y0 = math.floor(a), math.floor(b)
-        tx, ty = a - x0, b - y0
-        for i, wy in ((y0, 1.0 - ty), (y0 + 1, ty)):
-            for j, wx in ((x0, 1.0 - tx), (x0 + 1, tx)):
+        cols = [(j, max(0.0, 1.0 - abs(j - a) / half)) for j in range(x0 + 1 - r, x0 + r + 1)]
+        rows = [(i, max(0.0, 1.0 - abs(i - b) / half)) for i in range(y0 + 1 - r, y0 + r + 1)]
+        if r > 1:  # normalised: every point deposits a total weight of 1
+            sx, sy = sum(w for _, w in cols), sum(w for _, w in rows)
+            cols, rows = [(j, w / sx) for j, w in cols], [(i, w / sy) for i, w in rows]
+        for i, wy in rows:
+            for j, wx in cols:
                 w = wx * wy
                 if w > 0 and 0 <= i < Hs and 0 <= j < Ws:
-                    received[(i, j)].append((n, w, z))
+                    received[(i, j)].append((n, w, z, half == 1.0 or w >= CORE_WEIGHT / half**2))
 
     # 2. Z-buffer per sub-pixel, keep the front surface, pool into output pixels.
     A = torch.zeros(H * W, N, dtype=torch.float64)
     wsum = torch.zeros(H * W, dtype=torch.float64)
     depth = torch.full((H * W,), math.inf, dtype=torch.float64)
-    own_min = {key: min(z for _, _, z in c) for key, c in received.items()}
+    own_min = {key: min(z for _, _, z, _ in c) for key, c in received.items()}
+    if settings.soft_edges:  # the front is set by core contributions, where a pixel has one
+        own_front = {key: min([z for _, _, z, core in c if core] or [own_min[key]]) for key, c in received.items()}
+    else:
+        own_front = own_min
     for (i, j), contributions in received.items():
-        zmin = own_min[(i, j)]
+        zmin = own_front[(i, j)]
         if s == 2:  # visibility splatting: the nearest depth of the 3 x 3 sub-pixel neighbourhood
-            zmin = min(own_min.get((i + di, j + dj), math.inf) for di in (-1, 0, 1) for dj in (-1, 0, 1))
+            zmin = min(own_front.get((i + di, j + dj), math.inf) for di in (-1, 0, 1) for dj in (-1, 0, 1))
         p = (i // s) * W + (j // s)
         depth[p] = min(float(depth[p]), own_min[(i, j)])
-        for n, w, z in contributions:
+        for n, w, z, _ in contributions:
+            if settings.soft_edges and z * (1.0 + settings.depth_tolerance) < zmin:
+                continue  # a nearer surface's fringe gives way to the core-set front
             if z <= zmin * (1.0 + settings.depth_tolerance):
                 A[p, n] += w
                 wsum[p] += w

@@ -64,10 +64,17 @@ def push_pull(values: np.ndarray, weight: np.ndarray) -> np.ndarray:
     for k in range(len(ws) - 2, -1, -1):
         h, w_ = ws[k].shape
         up = _as3(cv2.pyrUp(est, dstsize=(w_, h)))
+        if k == 0:  # full size: only the pixels with some weight differ from the upsampled fill
+            w0 = ws[0]
+            np.copyto(up, values, where=(w0 >= 1.0)[..., None])  # weight 1: the pixel's own value
+            rows, cols = np.nonzero((w0 > 0) & (w0 < 1.0))  # fractional weights (rare): blend
+            a = w0[rows, cols][:, None]
+            up[rows, cols] = a * values[rows, cols] + (1.0 - a) * up[rows, cols]
+            return up.astype(np.float32, copy=False)
         own = wvs[k] / np.maximum(ws[k], 1e-12)[..., None]
-        alpha = np.minimum(ws[k] * (_ALPHA_GAIN if k > 0 else 1.0), 1.0)[..., None]
+        alpha = np.minimum(ws[k] * _ALPHA_GAIN, 1.0)[..., None]
         est = alpha * own + (1.0 - alpha) * up
-    return est.astype(np.float32, copy=False)
+    return est.astype(np.float32, copy=False)  # a single level: every pixel had weight
 
 
 def _as3(x: np.ndarray) -> np.ndarray:

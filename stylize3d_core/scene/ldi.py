@@ -17,30 +17,47 @@ Stage 3 of the pipeline (docs/architecture.md, "Pipeline stages"), after 3DPhoto
    becomes the farthest depth found just outside them, so nothing floats. Edge
    components with fewer foreground-edge pixels than the minimum length are
    then ignored (no tear, no hidden layer).
-4. **Hidden layer.** Foreground pixels within ``band`` of a foreground edge that
-   are in front of their local background (``nd`` minus its min-filter over the
-   band radius > ``disparity_jump``) get a second, hidden sample. Its depth comes
-   from *background sources only*: pixels near the edge, outside the band and
-   farther than their nearest foreground edge by more than the jump. Every band
-   pixel takes the ``nd`` of its nearest source (distance transform), smoothed
-   by a small normalised convolution over band and sources, then clamped to lie
-   behind the foreground by at least ``disparity_jump``. Its colour comes from
-   ``cv2.inpaint`` of the band, after every pixel that is not a source has been
-   given its nearest source's colour, so no foreground colour can bleed in.
-   Only padded boxes around clusters of edges are processed. With no edge the
-   step is skipped (``LDI.inpainted`` is False).
-5. **Border.** The canvas is extended by ``pad = round(border * long side)`` on every
-   side. Colour: push-pull continuation of the photo (blur grows with the
-   distance from the photo, no mirrored seams). Depth: the push-pull continuation
-   of ``nd``, never closer than the replicated photo-border pixel.
+4. **Coverage.** How much hidden background each edge can show is measured,
+   not assumed: for every foreground-edge pixel (front depth, and the farthest
+   depth within 3 px behind it) the parallax ``|uv'(front) - uv'(back)|`` is
+   computed for the extreme cameras of ``camera_range`` (the viewer's range)
+   and of the default trajectories (``geometry/camera_range.py``); for a
+   sideways move ``b`` it is ``b f |1/z_near - 1/z_far|``. The edge's hidden
+   layer is that wide plus a margin, capped at ``max_band``, and absent where
+   the parallax is under a pixel. The border is as wide as those cameras see
+   beyond the frame (at the depths found along each side), capped at
+   ``max_border``. Where the caps bind, the range is scaled down until it fits
+   and the LDI reports the covered fraction (``range_scale``, ``camera_range``).
+5. **Hidden layer.** Foreground pixels within their nearest edge's width of it
+   that are in front of their local background (``nd`` minus its min-filter
+   over that radius > ``disparity_jump``) get a second, hidden sample. Its depth
+   and colour come from *background sources only*: pixels near the edge,
+   outside the band, farther than their nearest foreground edge by more than
+   the jump, and more than ``edge_exclusion_px`` from any tear (the pixels at a
+   tear mix foreground and background colours). Every band pixel takes the
+   ``nd`` of its nearest source (distance transform), smoothed by a small
+   normalised convolution, then clamped to lie behind the foreground by at
+   least ``disparity_jump``. Its colour comes from ``cv2.inpaint`` of the band
+   after every pixel that is not a source has been given its nearest source's
+   colour, so no foreground colour can bleed in. The background side's own
+   mixed pixels (layer 0 just behind a tear) are recoloured by the same fill,
+   so no ghost of the foreground's outline stays on the background when the
+   foreground moves away. Only padded boxes around clusters of edges are
+   processed. With no edge the step is skipped (``LDI.inpainted`` is False).
+6. **Border.** The canvas is extended by ``pad`` pixels on every side (step 4).
+   Colour: push-pull continuation of the photo (blur grows with the distance
+   from the photo, no mirrored seams). Depth: the push-pull continuation of
+   ``nd``, never closer than the replicated photo-border pixel.
 
 Coordinates: canvas pixel ``(i, j)`` is photo pixel ``(i - pad, j - pad)``.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Literal, Optional, Tuple, Union
+import math
+
+from dataclasses import dataclass, field
+from typing import Literal, NamedTuple, Optional, Tuple, Union
 
 import cv2
 import numpy as np
@@ -48,7 +65,10 @@ import numpy as np
 from ..checks import check_choice, check_range, check_shape
 from ..depth.types import DepthMap
 from ..errors import InputError
-from ..geometry.camera import NEAR_DEPTH
+from ..geometry.camera import DEFAULT_FOV_Y_DEG, NEAR_DEPTH, check_fov
+from ..geometry.camera_range import (
+    CameraRange, border_overshoot, edge_parallax, range_corner_poses, trajectory_extreme_cameras,
+)
 from ..io.images import to_uint8
 from ._fill import box_clusters, cross_median, nearest_index, push_pull, ring_min, torn_regions
 
@@ -88,14 +108,40 @@ class LDISettings:
     (~100 px = 10 x 10 at 1 MP) are flattened into their surroundings."""
     island_min_px: int = 9
     """Lower bound of the island threshold in pixels: anything smaller than 3 x 3 is flattened."""
-    band: float = 0.04
-    """Width of the hidden background layer behind a foreground edge (~41 px at 1024); at least 2 px."""
-    border: float = 0.08
-    """Border extension on every side (~82 px at 1024); 0 disables it."""
+    band: Optional[float] = None
+    """Width of the hidden background layer behind a foreground edge. None (default): sized,
+    edge by edge, for what the cameras of ``camera_range`` (and the default trajectories)
+    can uncover there: ``parallax * (1 + hidden_margin) + hidden_margin_px`` photo pixels,
+    none where that parallax is under a pixel, at most ``max_band``. A number: that fixed
+    fraction of the long side at every edge (at least 2 px)."""
+    border: Optional[float] = None
+    """Border extension on every side. None (default): as far beyond the frame as the cameras
+    of ``camera_range`` (and the default trajectories) see, plus ``hidden_margin_px``, at most
+    ``max_border``. A number: that fixed fraction of the long side; 0 disables it."""
+    camera_range: CameraRange = field(default_factory=CameraRange)
+    """The interactive camera range the hidden layer and the border are sized for (the viewer's).
+    Where covering all of it would need more than ``max_band`` / ``max_border``, the LDI covers
+    the largest scaled-down part (``LDI.range_scale``, ``LDI.camera_range``)."""
+    cover_trajectories: bool = True
+    """Also size the layer and the border for the extremes of the default trajectories."""
+    max_band: float = 0.12
+    """Cap of the sized hidden layer, as a fraction of the long side (~123 px at 1024)."""
+    max_border: float = 0.15
+    """Cap of the sized border, as a fraction of the long side (~154 px at 1024)."""
+    hidden_margin: float = 0.1
+    """Relative margin added to the parallax when sizing the hidden layer."""
+    hidden_margin_px: float = 2.0
+    """Margin in pixels added to the sized hidden layer and border."""
+    edge_exclusion_px: int = 1
+    """Pixels this close to a tear (either side) never give colour to the hidden layer: they
+    hold anti-aliased mixtures of foreground and background (and absorb small misalignments
+    of the depth edge with the colour edge)."""
     inpaint_radius: int = 3
     """Neighbourhood radius of ``cv2.inpaint``, in pixels."""
-    inpaint_method: Literal["telea", "ns"] = "telea"
-    """``cv2.INPAINT_TELEA`` (fast marching) or ``cv2.INPAINT_NS`` (Navier-Stokes)."""
+    inpaint_method: Literal["telea", "ns", "push_pull"] = "telea"
+    """Colour of the hidden layer: ``cv2.INPAINT_TELEA`` (fast marching) or ``cv2.INPAINT_NS``
+    (Navier-Stokes) from the background sources, or ``"push_pull"``: their multi-scale
+    blend alone (smooth, no streaks)."""
 
     def __post_init__(self) -> None:
         check_range(self.disparity_jump, "disparity_jump", 0.0, 1.0, inclusive=False)
@@ -103,11 +149,20 @@ class LDISettings:
         check_range(self.edge_min_px, "edge_min_px", 1, 1_000_000)
         check_range(self.island_area, "island_area", 0.0, 0.1)
         check_range(self.island_min_px, "island_min_px", 0, 1_000_000)
-        check_range(self.band, "band", 0.0, 0.5)
-        check_range(self.border, "border", 0.0, 1.0)
+        if self.band is not None:
+            check_range(self.band, "band", 0.0, 0.5)
+        if self.border is not None:
+            check_range(self.border, "border", 0.0, 1.0)
+        if not isinstance(self.camera_range, CameraRange):
+            raise InputError("camera_range", f"expected a CameraRange, got {type(self.camera_range).__name__}")
+        check_range(self.max_band, "max_band", 0.0, 0.5)
+        check_range(self.max_border, "max_border", 0.0, 1.0)
+        check_range(self.hidden_margin, "hidden_margin", 0.0, 10.0)
+        check_range(self.hidden_margin_px, "hidden_margin_px", 0.0, 1000.0)
+        check_range(self.edge_exclusion_px, "edge_exclusion_px", 0, 100)
         check_range(self.inpaint_radius, "inpaint_radius", 1, 50)
-        check_choice(self.inpaint_method, "inpaint_method", ("telea", "ns"))
-        for name in ("edge_min_px", "island_min_px", "inpaint_radius"):
+        check_choice(self.inpaint_method, "inpaint_method", ("telea", "ns", "push_pull"))
+        for name in ("edge_min_px", "island_min_px", "inpaint_radius", "edge_exclusion_px"):
             if int(getattr(self, name)) != getattr(self, name):
                 raise InputError(name, f"must be an integer, got {getattr(self, name)!r}")
 
@@ -134,6 +189,12 @@ class LDI:
         settings: the settings used.
         photo_size: (H, W) of the photo.
         pad: border width in pixels.
+        range_scale: the fraction (in [0, 1]) of ``settings.camera_range`` the hidden
+            layer and the border cover (1: all of it; less where the photo's depth
+            jumps would need more than ``max_band`` / ``max_border``).
+        camera_range: ``settings.camera_range.scaled(range_scale)``: the range this
+            LDI shows without holes (the viewer's limits should not exceed it).
+        hidden_width: widest hidden layer behind any edge, in photo pixels (0 without one).
     """
 
     rgb: np.ndarray
@@ -149,6 +210,9 @@ class LDI:
     settings: LDISettings
     photo_size: Tuple[int, int]
     pad: int
+    range_scale: float = 1.0
+    camera_range: CameraRange = field(default_factory=CameraRange)
+    hidden_width: float = 0.0
 
     @property
     def canvas_size(self) -> Tuple[int, int]:
@@ -162,13 +226,24 @@ class LDI:
         return slice(self.pad, self.pad + h), slice(self.pad, self.pad + w)
 
     @property
+    def near_depth(self) -> float:
+        """Depth of the photo's near surface: the 1st percentile of its layer-0 depth (scene units)."""
+        return float(np.percentile(self.depth[self.photo_region], 1.0))
+
+    @property
+    def centre_depth(self) -> float:
+        """Depth of the orbit centre: the median of the photo's layer-0 depth (scene units)."""
+        return max(float(np.median(self.depth[self.photo_region])), self.near_depth)
+
+    @property
     def num_points(self) -> int:
         """Number of LDI pixels: every canvas pixel of layer 0 plus layer 1."""
         return self.depth.size + int(self.hidden_mask.sum())
 
 
 def build_ldi(
-    rgb: np.ndarray, depth: Union[np.ndarray, DepthMap], settings: LDISettings = LDISettings()
+    rgb: np.ndarray, depth: Union[np.ndarray, DepthMap], settings: LDISettings = LDISettings(),
+    fov_y_deg: float = DEFAULT_FOV_Y_DEG,
 ) -> LDI:
     """Build the layered depth image of a photo (see the module docstring).
 
@@ -176,6 +251,8 @@ def build_ldi(
         rgb: (H, W, 3) float in [0, 1], or uint8 (divided by 255).
         depth: (H, W) depth, finite and > 0 (any scale), or a :class:`DepthMap`.
         settings: see :class:`LDISettings`.
+        fov_y_deg: vertical field of view of the photo in degrees (the parallax a camera
+            move causes, hence the sized hidden layer and border, depend on it).
     Returns:
         The :class:`LDI`. The inputs are not modified.
     Raises:
@@ -184,6 +261,7 @@ def build_ldi(
     """
     if not isinstance(settings, LDISettings):
         raise InputError("settings", f"expected LDISettings, got {type(settings).__name__}")
+    fov = check_fov(fov_y_deg, "fov_y_deg")
     image = _check_rgb(rgb)
     z = _check_depth(depth, image.shape[:2])
     h, w = z.shape
@@ -194,9 +272,14 @@ def build_ldi(
     if settings.median_filter:
         nd = cross_median(nd)
     nd, fg, bg = _tear(nd, settings)
-    hidden = _hidden_layer(image, nd, fg, settings) if fg.any() else None
+    cover = _coverage(nd, fg, settings, fov)
+    hidden = _hidden_layer(image, nd, fg, bg, cover.widths, settings) if cover.widths.any() else None
+    if hidden is not None:
+        rim, rim_rgb = hidden[3], hidden[4]
+        image = image.copy()
+        image[rim] = rim_rgb[rim]  # no foreground colour left on the background side of a tear
 
-    pad = int(round(settings.border * long_side))
+    pad = cover.pad
     rgb0, nd0 = _extend_border(image, nd, pad)
     hc, wc = h + 2 * pad, w + 2 * pad
     inner = (slice(pad, pad + h), slice(pad, pad + w))
@@ -206,7 +289,7 @@ def build_ldi(
     hidden_rgb = np.zeros((hc, wc, 3), np.float32)
     hidden_depth = np.zeros((hc, wc), np.float32)
     if hidden is not None:
-        mask1, rgb1, nd1 = hidden
+        mask1, rgb1, nd1 = hidden[:3]
         hidden_mask[inner] = mask1
         hidden_rgb[inner][mask1] = rgb1[mask1]
         hidden_depth[inner][mask1] = NEAR_DEPTH / nd1[mask1]
@@ -227,7 +310,92 @@ def build_ldi(
         settings=settings,
         photo_size=(h, w),
         pad=pad,
+        range_scale=cover.scale,
+        camera_range=settings.camera_range.scaled(cover.scale),
+        hidden_width=float(cover.widths.max()) if cover.widths.size else 0.0,
     )
+
+
+class _Coverage(NamedTuple):
+    """What the hidden layer and the border must cover (see :func:`_coverage`)."""
+
+    widths: np.ndarray  # (H, W) float32 hidden-layer width behind each foreground-edge pixel, 0 elsewhere
+    pad: int  # border width in pixels
+    scale: float  # fraction of the camera range covered
+
+
+_MAX_DEPTH_SIGMA = 4.0
+"""Largest smoothing (pixels) of the hidden layer's nearest-source depth."""
+
+_SEARCH_EDGES = 1500
+"""The range scale is searched on at most this many foreground-edge pixels (evenly picked)."""
+
+
+def _coverage(nd: np.ndarray, fg: np.ndarray, s: LDISettings, fov: float) -> _Coverage:
+    """Hidden-layer width per foreground-edge pixel, border width and the covered range scale.
+
+    Parallax of every edge (front: its own depth; back: the farthest depth within
+    3 px) and the border overshoot are measured for the corners of the camera
+    range and the trajectories' extremes (:mod:`~stylize3d_core.geometry.camera_range`).
+    The range is scaled down (bisection) until both fit their caps.
+    """
+    h, w = nd.shape
+    long_side = max(h, w)
+    z = NEAR_DEPTH / nd  # (H, W) scene units
+    near = float(np.percentile(z, 1.0))
+    centre = max(float(np.median(z)), near)
+    band_cap = float(max(2, round(s.band * long_side))) if s.band is not None else s.max_band * long_side
+    border_cap = s.border * long_side if s.border is not None else s.max_border * long_side
+    if s.cover_trajectories:
+        traj_poses, traj_fovs = trajectory_extreme_cameras(fov)
+    else:
+        traj_poses, traj_fovs = np.zeros((0, 4, 4)), np.zeros(0)
+
+    rows, cols = np.nonzero(fg)
+    uv = np.stack([cols + 0.5, rows + 0.5], axis=1).astype(np.float64)  # (E, 2)
+    z_front = z[rows, cols].astype(np.float64)
+    z_back = (NEAR_DEPTH / np.maximum(cv2.erode(nd, np.ones((7, 7), np.uint8)), 1e-6))[rows, cols].astype(np.float64)
+    sides = tuple(np.array([v.min(), v.max()], np.float64) for v in (z[0], z[-1], z[:, 0], z[:, -1]))
+    pick = np.linspace(0, len(uv) - 1, min(len(uv), _SEARCH_EDGES)).astype(int) if len(uv) else np.zeros(0, int)
+
+    def viewer(scale: float, idx: np.ndarray) -> Tuple[np.ndarray, float]:
+        poses = range_corner_poses(s.camera_range.scaled(scale), centre, near)
+        fovs = np.full(len(poses), fov)
+        par = edge_parallax(uv[idx], z_front[idx], z_back[idx], poses, fovs, (h, w), fov)
+        return par, border_overshoot(sides, poses, fovs, (h, w), fov)
+
+    def excess(scale: float) -> float:
+        """Largest ratio of what the range scaled by ``scale`` needs to its cap (<= 1: fits)."""
+        par, over = viewer(scale, pick)
+        need = float((par * (1.0 + s.hidden_margin) + s.hidden_margin_px).max()) if par.size else 0.0
+        return max(need / band_cap, (over + s.hidden_margin_px) / max(border_cap, 1e-9))
+
+    # Parallax and overshoot grow about linearly with the range's scale: start from the
+    # linear estimate, then shrink until it fits.
+    scale, ratio = 1.0, excess(1.0)
+    for _ in range(12):
+        if ratio <= 1.0:
+            break
+        scale *= 0.97 / ratio if ratio < 4.0 else 0.25
+        ratio = excess(scale)
+    else:
+        scale = 0.0
+    par, over = viewer(scale, np.arange(len(uv)))
+    traj_par = edge_parallax(uv, z_front, z_back, traj_poses, traj_fovs, (h, w), fov)
+    traj_over = border_overshoot(sides, traj_poses, traj_fovs, (h, w), fov)
+    need = np.maximum(par, traj_par)  # (E,) photo pixels of background a camera can uncover
+    if s.band is not None:
+        width = np.full(len(uv), band_cap)
+    else:
+        width = np.minimum(band_cap, need * (1.0 + s.hidden_margin) + s.hidden_margin_px)
+        width[need < 1.0] = 0.0  # the jump uncovers less than a pixel: no hidden layer there
+    widths = np.zeros((h, w), np.float32)
+    widths[rows, cols] = width
+    if s.border is not None:
+        pad = int(round(border_cap))
+    else:
+        pad = min(int(round(border_cap)), int(math.ceil(max(over, traj_over) + s.hidden_margin_px)))
+    return _Coverage(widths, pad, float(scale))
 
 
 def _check_rgb(rgb: np.ndarray) -> np.ndarray:
@@ -320,61 +488,82 @@ def _tear(nd: np.ndarray, s: LDISettings) -> Tuple[np.ndarray, np.ndarray, np.nd
 
 
 def _hidden_layer(
-    rgb: np.ndarray, nd: np.ndarray, fg: np.ndarray, s: LDISettings
+    rgb: np.ndarray, nd: np.ndarray, fg: np.ndarray, bg: np.ndarray, widths: np.ndarray, s: LDISettings
 ) -> Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """Hidden background behind the foreground edges.
+    """Hidden background behind the foreground edges, ``widths`` (H, W) pixels wide behind each.
 
     Returns:
         mask (H, W) bool, rgb (H, W, 3) float32 and nd (H, W) float32 of layer 1
-        (valid where mask), or None when no band pixel was found.
+        (valid where mask), then rim (H, W) bool and rim_rgb (H, W, 3): layer-0 pixels
+        just behind a tear and their background-only colour; None when no band pixel was found.
     """
     h, w = nd.shape
     t = s.disparity_jump
-    band_px = max(2, int(round(s.band * max(h, w))))
-    reach = band_px + 2 * s.inpaint_radius + 2  # background sources are looked for this far
-    window = np.ones((2 * band_px + 3, 2 * band_px + 3), np.uint8)
-    sigma = max(1.0, band_px / 8.0)  # smoothing of the hidden depth, in pixels
-    flag = cv2.INPAINT_TELEA if s.inpaint_method == "telea" else cv2.INPAINT_NS
+    edges = fg & (widths > 0)
+    max_width = int(math.ceil(widths.max()))
+    flag = cv2.INPAINT_NS if s.inpaint_method == "ns" else cv2.INPAINT_TELEA
+    ex = s.edge_exclusion_px
+    exclusion = np.ones((2 * ex + 1, 2 * ex + 1), np.uint8)
 
     mask = np.zeros((h, w), bool)
     out_rgb = np.zeros((h, w, 3), np.float32)
     out_nd = np.zeros((h, w), np.float32)
-    for rows, cols, members in box_clusters(fg, reach + 2):
+    rim_mask = np.zeros((h, w), bool)
+    rim_rgb = np.zeros((h, w, 3), np.float32)
+    for rows, cols, members in box_clusters(edges, max_width + 2 * s.inpaint_radius + ex + 4):
         ndc = nd[rows, cols]  # (h, w)
         rgbc = rgb[rows, cols]  # (h, w, 3)
+        nearest_edge = nearest_index(members)  # (h, w)
+        width = widths[rows, cols][members][nearest_edge]  # (h, w) width behind the nearest edge pixel
+        band_px = int(math.ceil(width.max()))
+        reach = band_px + 2 * s.inpaint_radius + ex + 2  # background sources are looked for this far
         not_edge = np.where(members, 0, 255).astype(np.uint8)
         dist = cv2.distanceTransform(not_edge, cv2.DIST_L2, 5)  # (h, w) to the nearest edge pixel
-        ref = ndc[members][nearest_index(members)]  # (h, w) nd of the nearest foreground-edge pixel
-        local_min = cv2.erode(ndc, window)  # (h, w) farthest nd within the band radius
-        band = (dist <= band_px) & (ndc - local_min > t)
+        ref = ndc[members][nearest_edge]  # (h, w) nd of the nearest foreground-edge pixel
+        local_min = cv2.erode(ndc, np.ones((2 * band_px + 3, 2 * band_px + 3), np.uint8))  # farthest nd nearby
+        band = (dist <= width) & (width > 0) & (ndc - local_min > t)
         if not band.any():
             continue
+        # Anti-aliased pixels on either side of a tear mix foreground and background colours.
+        mixed = cv2.dilate((fg[rows, cols] | bg[rows, cols]).astype(np.uint8), exclusion) > 0 if ex else members
         near = (dist <= reach) & ~band
-        source = near & (ndc < ref - t)  # clearly behind the nearest foreground edge
+        source = near & (ndc < ref - t) & ~mixed  # clearly behind the nearest foreground edge
         if not source.any():  # degenerate: nothing clearly behind; use the local background
-            source = near & (ndc <= local_min + t)
+            source = near & (ndc <= local_min + t) & ~mixed
+        if not source.any():
+            source = ~band & ~mixed
         if not source.any():
             source = ~band
         # every pixel takes the values of its nearest background source (no foreground can leak)
         nearest = nearest_index(source)  # (h, w)
         bg_nd = ndc[source][nearest]  # (h, w)
-        bg_rgb = rgbc[source][nearest]  # (h, w, 3)
         # smooth the Voronoi seams of that fill within band + sources (normalised convolution)
         weight = (band | source).astype(np.float32)
+        sigma = min(_MAX_DEPTH_SIGMA, max(1.0, band_px / 8.0))
         blur_nd = cv2.GaussianBlur(bg_nd * weight, (0, 0), sigma) / np.maximum(
             cv2.GaussianBlur(weight, (0, 0), sigma), 1e-6
         )
         behind = np.minimum(blur_nd, ndc - t)  # (h, w) strictly behind the foreground
-        context = np.where(source[..., None], rgbc, bg_rgb)  # background-only colours
-        context8 = to_uint8(context)
-        colour = cv2.inpaint(context8, band.astype(np.uint8), s.inpaint_radius, flag)
+        # The background side's own mixed pixels (layer 0, just behind the tear) would stay on the
+        # background as a thin ghost of the foreground's outline once the foreground moves away.
+        rim = mixed & ~band & ~members & (ndc < ref - t) & (dist <= reach)
+        todo = band | rim
+        if s.inpaint_method == "push_pull":  # a multi-scale blend of the background sources
+            colour = push_pull(rgbc, source.astype(np.float32))
+        else:
+            context = np.where(source[..., None], rgbc, rgbc[source][nearest])  # background-only colours
+            colour = cv2.inpaint(to_uint8(context), todo.astype(np.uint8), s.inpaint_radius, flag)
+            colour = colour.astype(np.float32) / 255.0
         sub_mask = mask[rows, cols]
         sub_mask |= band
-        out_rgb[rows, cols][band] = colour[band].astype(np.float32) / 255.0
+        out_rgb[rows, cols][band] = colour[band]
         out_nd[rows, cols][band] = behind[band]
+        sub_rim = rim_mask[rows, cols]
+        sub_rim |= rim
+        rim_rgb[rows, cols][rim] = colour[rim]
     if not mask.any():
         return None
-    return mask, out_rgb, out_nd
+    return mask, out_rgb, out_nd, rim_mask, rim_rgb
 
 
 def _extend_border(rgb: np.ndarray, nd: np.ndarray, pad: int) -> Tuple[np.ndarray, np.ndarray]:

@@ -17,6 +17,7 @@ from ..checks import check_shape
 from ..depth.types import DepthMap
 from ..errors import InputError
 from ..geometry.camera import DEFAULT_FOV_Y_DEG, check_fov
+from ..geometry.camera_range import CameraRange
 from .ldi import LDI, LDISettings, build_ldi
 from .pointcloud import PointCloud, ldi_to_points
 
@@ -65,6 +66,12 @@ class Photo3D:
         """(H, W) of the photo."""
         return self.rgb.shape[:2]
 
+    @property
+    def camera_range(self) -> CameraRange:
+        """The part of ``settings.ldi.camera_range`` this 3D photo shows without holes
+        (``ldi.camera_range``): the viewer's limits for it (``OrbitLimits.from_range``)."""
+        return self.ldi.camera_range
+
     @staticmethod
     def build(rgb: np.ndarray, depth: DepthMap, settings: Photo3DSettings = Photo3DSettings()) -> "Photo3D":
         """Build the LDI and the point cloud of ``rgb`` (H, W, 3) with ``depth`` (H, W)."""
@@ -75,7 +82,7 @@ class Photo3D:
             raise InputError(depth.source, f"depth is {depth.shape} but the photo is {rgb.shape[:2]}")
         fov = DEFAULT_FOV_Y_DEG if settings.fov_y_deg is None else settings.fov_y_deg
         t0 = time.perf_counter()
-        ldi = build_ldi(rgb, depth, settings.ldi)
+        ldi = build_ldi(rgb, depth, settings.ldi, fov)
         t1 = time.perf_counter()
         points = ldi_to_points(ldi, fov)
         t2 = time.perf_counter()

@@ -154,3 +154,16 @@ def test_bad_input():
         OrbitLimits(near_margin=1.0)
     with pytest.raises(InputError, match="max_dolly"):
         OrbitLimits(max_dolly=2.0)
+
+
+def test_limits_come_from_the_library_range():
+    from stylize3d_core.geometry.camera_range import CameraRange
+
+    assert LIMITS.camera_range() == CameraRange()  # the viewer's defaults are the library's
+    photo_range = CameraRange().scaled(0.25)
+    limits = OrbitLimits.from_range(photo_range, deg_per_pixel=0.02)
+    assert limits.camera_range() == photo_range and limits.deg_per_pixel == 0.02
+    c = clamp_pose(OrbitPose(100, 100, 5, 5, 10), SCENE, limits)
+    assert (c.yaw_deg, c.pitch_deg, c.pan_x) == (photo_range.max_yaw_deg, photo_range.max_pitch_deg,
+                                                 photo_range.max_pan)
+    assert c.dolly <= photo_range.max_dolly * SCENE.centre_depth + 1e-12

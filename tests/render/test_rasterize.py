@@ -380,3 +380,99 @@ def test_bad_inputs():
     for args, name in cases:
         with pytest.raises(InputError, match=name):
             rasterize_points(*args)
+
+
+# ----------------------------------------------------------------------------- grown splats
+
+
+def footprint(pts: torch.Tensor, K: torch.Tensor, pixels) -> torch.Tensor:
+    """Point sizes (N,) that cover ``pixels`` output pixels each in the view of ``K``."""
+    return torch.as_tensor(pixels, dtype=pts.dtype).expand(pts.shape[0]) * pts[:, 2] / K[0, 0]
+
+
+@pytest.mark.parametrize("supersample", [1, 2])
+@pytest.mark.parametrize("seed", range(3))
+def test_grown_splats_match_reference_forward_and_backward(supersample, seed):
+    H, W = 8, 9
+    pts, feats, K = random_scene(H, W, 60, 3, seed)
+    g = torch.Generator().manual_seed(100 + seed)
+    sizes = footprint(pts, K, 0.5 + 3.5 * torch.rand(pts.shape[0], generator=g, dtype=F64))  # 0.5 .. 4 px
+    sizes = sizes.nan_to_num(0.01)
+    settings = RasterSettings(H, W, supersample=supersample)
+    feats_a = feats.clone().requires_grad_(True)
+    feats_b = feats.clone().requires_grad_(True)
+    fast = rasterize_points(pts, feats_a, K, settings, point_size=sizes)
+    ref = rasterize_points_reference(pts, feats_b, K, settings, point_size=sizes)
+    assert torch.allclose(fast.image, ref.image, atol=1e-12)
+    assert torch.allclose(fast.weight, ref.weight, atol=1e-12)
+    assert torch.equal(fast.depth, ref.depth) and torch.equal(fast.hole, ref.hole)
+    upstream = torch.randn(3, H, W, dtype=F64, generator=g)
+    (fast.image * upstream).sum().backward()
+    (ref.image * upstream).sum().backward()
+    assert torch.allclose(feats_a.grad, feats_b.grad, atol=1e-12)
+
+
+def test_grown_splat_known_weights_and_unit_footprint_is_bilinear(raster):
+    K = simple_K(9, 9)
+    pts, feats = scene(K, [(4.5, 4.5, 1.0)], C=1)  # at the centre of pixel (4, 4)
+    two = raster(pts, feats, K, RasterSettings(9, 9), point_size=footprint(pts, K, 2.0))
+    # tent of half-width 2 at offsets -1, 0, +1 (the +-2 taps weigh 0): 1/4, 1/2, 1/4 per axis
+    want = torch.tensor([0.25, 0.5, 0.25], dtype=F64)
+    torch.testing.assert_close(two.weight[3:6, 3:6], want[:, None] * want[None])
+    assert two.hole.sum() == 81 - 9
+    # a footprint of at most one pixel is the bilinear splat
+    pts, feats = scene(K, [(4.2, 3.9, 1.0), (6.7, 2.2, 1.5)], C=2)
+    plain = raster(pts, feats, K, RasterSettings(9, 9))
+    small = raster(pts, feats, K, RasterSettings(9, 9), point_size=footprint(pts, K, 0.7))
+    torch.testing.assert_close(plain.weight, small.weight)
+    torch.testing.assert_close(plain.image, small.image)
+
+
+@pytest.mark.parametrize("supersample", [1, 2])
+def test_magnified_grid_has_no_holes_with_grown_splats(supersample):
+    """A surface whose points land 2.5 px apart (moving in) shows a grid of holes with
+    bilinear splats and none with splats grown to the footprint."""
+    H, W, step = 40, 40, 2.5
+    K = simple_K(H, W, f=30.0)
+    coords = torch.arange(-1.0, W + 1, step, dtype=F64)
+    uu, vv = torch.meshgrid(coords, coords, indexing="xy")
+    specs = [(float(u), float(v), 2.0) for u, v in zip(uu.reshape(-1), vv.reshape(-1))]
+    pts, feats = scene(K, specs, C=3)
+    settings = RasterSettings(H, W, supersample=supersample)
+    plain = rasterize_points(pts, feats, K, settings)
+    grown = rasterize_points(pts, feats, K, settings, point_size=footprint(pts, K, step))
+    assert plain.hole.float().mean() > 0.2
+    assert not grown.hole.any()
+
+
+@pytest.mark.parametrize("supersample", [1, 2])
+@pytest.mark.parametrize("seed", range(2))
+def test_soft_edges_match_reference(supersample, seed):
+    H, W = 8, 9
+    pts, feats, K = random_scene(H, W, 70, 2, seed)
+    g = torch.Generator().manual_seed(200 + seed)
+    sizes = footprint(pts, K, 0.5 + 2.5 * torch.rand(pts.shape[0], generator=g, dtype=F64)).nan_to_num(0.01)
+    settings = RasterSettings(H, W, supersample=supersample, soft_edges=True)
+    for size in (None, sizes):
+        fast = rasterize_points(pts, feats, K, settings, point_size=size)
+        ref = rasterize_points_reference(pts, feats, K, settings, point_size=size)
+        assert torch.allclose(fast.image, ref.image, atol=1e-12)
+        assert torch.equal(fast.hole, ref.hole)
+
+
+def test_soft_edges_keep_a_silhouette_from_growing(raster):
+    """A grown front splat whose fringe grazes a background pixel hides it by default; with
+    soft edges the background pixel keeps its own colour (bilinear splats are unchanged)."""
+    K = simple_K(6, 6)
+    pts = torch.tensor([point_at(1.5, 2.5, 2.0, K), point_at(3.9, 2.5, 1.0, K)], dtype=F64)  # back, front
+    feats = torch.tensor([[0.0], [1.0]], dtype=F64)
+    size = footprint(pts, K, torch.tensor([1.0, 2.5], dtype=F64))  # the front covers 2.5 px
+    hard = raster(pts, feats, K, RasterSettings(6, 6), point_size=size)
+    soft = raster(pts, feats, K, RasterSettings(6, 6, soft_edges=True), point_size=size)
+    # pixel (2, 1): the back point's own pixel, 2.4 px from the front point (fringe weight > 0)
+    assert float(hard.weight[2, 1]) > 0 and float(hard.image[0, 2, 1]) == pytest.approx(1.0)
+    assert float(soft.image[0, 2, 1]) == pytest.approx(0.0)
+    assert float(soft.image[0, 2, 3]) == pytest.approx(1.0)  # the front's core pixels stay the front
+    plain = raster(pts, feats, K, RasterSettings(6, 6))
+    plain_soft = raster(pts, feats, K, RasterSettings(6, 6, soft_edges=True))
+    torch.testing.assert_close(plain.image, plain_soft.image)

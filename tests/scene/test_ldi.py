@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
 from stylize3d_core.depth.types import DepthMap
 from stylize3d_core.errors import InputError
 from stylize3d_core.geometry.camera import NEAR_DEPTH
+from stylize3d_core.geometry.camera_range import CameraRange
 from stylize3d_core.scene._fill import cross_median, push_pull, torn_regions
 from stylize3d_core.scene.ldi import (
     BORDER,
@@ -103,7 +106,9 @@ def test_fronto_parallel_plane():
     assert not ldi.inpainted
     assert not ldi.fg_edge.any() and not ldi.bg_edge.any() and not ldi.hidden_mask.any()
     assert ldi.depth_scale == pytest.approx(NEAR_DEPTH / 2.5)
-    assert ldi.pad == round(0.08 * 64)
+    # the border is sized for the camera range, within its cap; a fixed border is kept exactly
+    assert 0 < ldi.pad <= round(LDISettings().max_border * 64)
+    assert build_ldi(rgb, depth, LDISettings(border=0.08)).pad == round(0.08 * 64)
     assert ldi.canvas_size == (48 + 2 * ldi.pad, 64 + 2 * ldi.pad)
     np.testing.assert_allclose(ldi.depth, NEAR_DEPTH, rtol=1e-6)  # border too
     np.testing.assert_array_equal(photo(ldi, ldi.rgb), rgb)
@@ -131,7 +136,7 @@ def test_no_border():
 @pytest.mark.parametrize("size,lo,hi", [(96, 30, 70), (160, 20, 140)])
 def test_square_on_wall(size, lo, hi):
     rgb, depth, square = square_scene(size, lo, hi)
-    ldi = build_ldi(rgb, depth)
+    ldi = build_ldi(rgb, depth, LDISettings(band=0.04))  # a fixed band: its exact extent is known
     assert ldi.inpainted
     assert ldi.depth_scale == pytest.approx(NEAR_DEPTH / 1.0)
     fg, bg = photo(ldi, ldi.fg_edge), photo(ldi, ldi.bg_edge)
@@ -349,3 +354,72 @@ def test_real_photo_disc_in_front_of_ramp():
     ramp = depth[~disc] * ldi.depth_scale
     hd = ldi.hidden_depth[m]
     assert hd.min() >= ramp.min() * 0.99 and hd.max() <= ramp.max() * 1.01
+
+
+# ---------------------------------------------------------------- (f) sized for the camera range
+
+
+def test_hidden_layer_is_as_wide_as_the_camera_range_uncovers():
+    from stylize3d_core.geometry.camera import focal_from_fov
+    from stylize3d_core.geometry.trajectories import DEFAULT_XY
+
+    rgb, depth, square = square_scene(160, 40, 120, near=1.0, far=3.0)
+    cap = 0.3  # fraction of the long side, high enough not to bind for the trajectories
+    still = LDISettings(camera_range=CameraRange().scaled(0.0), max_band=cap)  # the trajectories alone
+    ldi = build_ldi(rgb, depth, still)
+    assert ldi.range_scale == 1.0
+    # the trajectories move sideways by up to the (x, y) = (0.02, 0.02) diagonal (and forward)
+    f = focal_from_fov(60.0, 160)
+    sideways = math.hypot(DEFAULT_XY, DEFAULT_XY) * f * (1 / NEAR_DEPTH - 1 / (3 * NEAR_DEPTH))
+    assert sideways <= ldi.hidden_width < cap * 160
+    mask = photo(ldi, ldi.hidden_mask)
+    assert mask.any() and not mask[~square].any()
+    # a larger camera range needs (and gets) a wider layer, up to the cap; the range it covers is reported
+    wide = build_ldi(rgb, depth, LDISettings(max_band=cap))
+    assert wide.hidden_width > ldi.hidden_width and wide.num_points > ldi.num_points
+    assert wide.hidden_width <= cap * 160 + 1e-4
+    assert 0.0 < wide.range_scale <= 1.0
+    assert wide.camera_range == CameraRange().scaled(wide.range_scale)
+    capped = build_ldi(rgb, depth, LDISettings(max_band=0.05))
+    assert capped.hidden_width <= 0.05 * 160 + 1e-4 and capped.range_scale < wide.range_scale
+
+
+def test_no_hidden_layer_where_the_jump_uncovers_less_than_a_pixel():
+    # a small depth step far away: torn (its disparity jump exceeds the threshold) but no
+    # camera of the range moves it by a pixel
+    depth = np.full((64, 64), 30.0, np.float32)
+    depth[:, :32] = 1.0  # the near half: scene units put it at the near depth
+    depth[20:44, 40:56] = 27.0  # a step on the far background
+    rgb = np.full((64, 64, 3), 0.5, np.float32)
+    s = LDISettings(camera_range=CameraRange().scaled(0.0), edge_min_px=4, median_filter=False,
+                    disparity_jump=0.002)
+    ldi = build_ldi(rgb, depth, s)
+    step = np.zeros((64, 64), bool)
+    step[20:44, 40:56] = True
+    assert photo(ldi, ldi.fg_edge)[step].any()  # torn ...
+    assert not photo(ldi, ldi.hidden_mask)[step].any()  # ... but no hidden layer
+    assert photo(ldi, ldi.hidden_mask)[:, :32].any()  # the big jump has one
+
+
+def test_bright_foreground_never_colours_the_hidden_layer():
+    """A bright disc with anti-aliased edges on a dark wall: no hidden point and no layer-0 pixel
+    behind the tear has the foreground's colour (no halo, no ghost outline)."""
+    import cv2
+
+    size = 200
+    fine = np.zeros((size * 4, size * 4), np.uint8)
+    cv2.circle(fine, (size * 2, size * 2), size, 255, -1)
+    cover = cv2.resize(fine.astype(np.float32) / 255.0, (size, size), interpolation=cv2.INTER_AREA)  # (S, S)
+    bright, dark = np.float32([1.0, 0.95, 0.8]), np.float32([0.1, 0.12, 0.15])
+    rgb = cover[..., None] * bright + (1 - cover[..., None]) * dark  # anti-aliased colours
+    depth = np.where(cover > 0.5, 1.0, 4.0).astype(np.float32)  # the depth edge at the half-cover line
+    ldi = build_ldi(rgb, depth)
+    assert ldi.inpainted
+    hidden = ldi.hidden_rgb[ldi.hidden_mask]  # (M, 3)
+    # distance from the dark wall's colour, as a fraction of the foreground's
+    share = np.linalg.norm(hidden - dark, axis=1) / np.linalg.norm(bright - dark)
+    assert share.max() < 0.05, f"foreground colour in the hidden layer: {share.max():.3f}"
+    behind = photo(ldi, ldi.depth) > 2.0 * ldi.depth_scale
+    wall = photo(ldi, ldi.rgb)[behind]
+    share0 = np.linalg.norm(wall - dark, axis=1) / np.linalg.norm(bright - dark)
+    assert share0.max() < 0.05, f"a ghost of the foreground's outline on the wall: {share0.max():.3f}"
