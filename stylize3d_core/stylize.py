@@ -24,13 +24,13 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Dict, Iterator, Optional
+from typing import Callable, Dict, Iterator, List, Optional
 
 import numpy as np
 import torch
 
 from .checks import check_range, check_shape
-from .errors import InputError
+from .errors import InputError, RenderInterrupted
 from .geometry.camera import Cameras
 from .models.adaattn import blend
 from .models.checkpoint import Checkpoint, load_checkpoint
@@ -70,6 +70,18 @@ def style_tensor(style_rgb: np.ndarray, name: str = "style image") -> torch.Tens
     if not np.isfinite(style_rgb).all():
         raise InputError(name, "contains NaN or infinite values")
     return torch.from_numpy(np.ascontiguousarray(style_rgb, dtype=np.float32)).permute(2, 0, 1)[None].clamp(0, 1)
+
+
+def _stop_hooks(decoder: torch.nn.Module, should_stop: Callable[[], bool]) -> List:
+    """Forward pre-hooks on the decoder's levels and output layers that raise
+    :class:`RenderInterrupted` once ``should_stop()`` is True (the caller removes them)."""
+    def check(_module, _inputs):
+        if should_stop():
+            raise RenderInterrupted("render stopped inside the decoder")
+
+    stages = [m for name in ("skips", "downs", "ups") for m in getattr(decoder, name, [])]
+    stages += [getattr(decoder, name) for name in ("out_conv", "out_rgb") if hasattr(decoder, name)]
+    return [m.register_forward_pre_hook(check) for m in stages]
 
 
 class Stylized3DPhoto:
@@ -161,8 +173,16 @@ class Stylized3DPhoto:
             self._dense = dense.index_select(0, self._order).contiguous()
         self.timings["upsample"] = time.perf_counter() - t0
 
-    def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False) -> np.ndarray:
-        """One view (H, W, 3) float32 in [0, 1]; ``preview`` renders a point subset without supersampling."""
+    def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False,
+               should_stop: Optional[Callable[[], bool]] = None) -> np.ndarray:
+        """One view (H, W, 3) float32 in [0, 1]; ``preview`` renders a point subset without supersampling.
+
+        ``should_stop`` (any thread may make it return True) is checked between
+        the stages: before rasterizing, before each level of the decoder and
+        before its output layers; when it returns True the render stops with
+        :class:`~stylize3d_core.errors.RenderInterrupted` (nothing is cached
+        from a stopped render).
+        """
         if self._dense is None:  # upsampled lazily: a style set right after construction is not done twice
             self._update_dense()
         n = self.num_points
@@ -171,9 +191,17 @@ class Stylized3DPhoto:
             ss = 1
         else:
             keep, ss = n, self.settings.supersample
-        with torch.inference_mode():
-            rgb, _ = self.model.render_view(self._dense[:keep], self._xyz[:keep], camera, height, width, supersample=ss)
-            rgb = torch.nan_to_num(rgb, nan=0.0).clamp_(0.0, 1.0)
+        hooks = _stop_hooks(self.model.decoder, should_stop) if should_stop is not None else []
+        try:
+            with torch.inference_mode():
+                if should_stop is not None and should_stop():
+                    raise RenderInterrupted("render stopped before rasterizing")
+                rgb, _ = self.model.render_view(self._dense[:keep], self._xyz[:keep], camera, height, width,
+                                                supersample=ss)
+                rgb = torch.nan_to_num(rgb, nan=0.0).clamp_(0.0, 1.0)
+        finally:
+            for h in hooks:
+                h.remove()
         return rgb.permute(1, 2, 0).contiguous().numpy()
 
     def frames(self, cameras: Cameras, height: int, width: int) -> Iterator[np.ndarray]:

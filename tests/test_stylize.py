@@ -58,3 +58,32 @@ def test_frames_and_bad_input(stylized):
         stylized.set_style(np.full((8, 8, 3), np.nan, np.float32))
     with pytest.raises(InputError):
         StylizeSettings(supersample=3)
+
+
+def test_render_stops_between_stages_when_asked(stylized):
+    """``should_stop`` is checked before rasterizing and before each decoder level."""
+    from stylize3d_core.errors import RenderInterrupted
+
+    s = stylized
+    cam = Cameras.identity(s.photo.fov_y_deg)
+    calls = []
+
+    def stop_after(n):
+        def check():
+            calls.append(1)
+            return len(calls) > n
+        return check
+
+    with pytest.raises(RenderInterrupted):
+        s.render(cam, 32, 48, should_stop=stop_after(0))
+    assert len(calls) == 1
+    for n in (1, 3):  # stopped inside the decoder
+        calls.clear()
+        with pytest.raises(RenderInterrupted):
+            s.render(cam, 32, 48, should_stop=stop_after(n))
+        assert len(calls) == n + 1
+    calls.clear()
+    full = s.render(cam, 32, 48, should_stop=lambda: calls.append(1) and False)
+    assert len(calls) > 3  # checked at every stage
+    assert (full == s.render(cam, 32, 48)).all()  # the hooks are gone and change nothing
+    assert not s.model.decoder.out_rgb._forward_pre_hooks

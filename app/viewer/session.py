@@ -28,7 +28,7 @@ from typing import Callable, NamedTuple, Optional, Tuple
 import cv2
 import numpy as np
 
-from stylize3d_core.errors import InputError
+from stylize3d_core.errors import InputError, RenderInterrupted
 from stylize3d_core.geometry.camera import Cameras
 from stylize3d_core.io.images import load_image, to_uint8
 from stylize3d_core.io.video import Progress, write_video
@@ -190,18 +190,25 @@ class ViewerSession:
         return self.strength
 
     # -- rendering ----------------------------------------------------------------
-    def render(self, camera: Cameras, height: int, width: int, *, preview: bool, stylized: bool) -> np.ndarray:
-        """One view (H, W, 3) float32 in [0, 1]: through the model when ``stylized`` and available."""
+    def render(self, camera: Cameras, height: int, width: int, *, preview: bool, stylized: bool,
+               should_stop: Optional[Callable[[], bool]] = None) -> np.ndarray:
+        """One view (H, W, 3) float32 in [0, 1]: through the model when ``stylized`` and available.
+
+        ``should_stop`` is checked between stages; once it returns True the render
+        raises :class:`~stylize3d_core.errors.RenderInterrupted`.
+        """
         if self.photo is None:
             raise InputError("photo", "open a photo first")
         if stylized and self._stylized is not None:
-            return self._stylized.render(camera, height, width, preview=preview)
+            return self._stylized.render(camera, height, width, preview=preview, should_stop=should_stop)
+        if should_stop is not None and should_stop():
+            raise RenderInterrupted("render stopped before rasterizing")
         return self._plain.render(camera, height, width, preview=preview)
 
     def render_view(self, camera: Cameras, size: Tuple[int, int], display_hw: Tuple[int, int], *,
-                    preview: bool, stylized: bool) -> ViewFrame:
-        """Render at ``size`` (H, W) and convert for display at ``display_hw``."""
-        rgb = self.render(camera, size[0], size[1], preview=preview, stylized=stylized)
+                    preview: bool, stylized: bool, should_stop: Optional[Callable[[], bool]] = None) -> ViewFrame:
+        """Render at ``size`` (H, W) and convert for display at ``display_hw`` (``should_stop``: see :meth:`render`)."""
+        rgb = self.render(camera, size[0], size[1], preview=preview, stylized=stylized, should_stop=should_stop)
         return ViewFrame(display_image(rgb, display_hw), tuple(size), stylized and self.can_stylize, preview)
 
     def export(self, job: ExportJob, progress: Optional[Progress] = None,

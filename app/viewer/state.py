@@ -9,9 +9,9 @@ camera-path :class:`Playback`; the window replaces it with
 worker, so no state is shared between threads. :func:`shows_stylized` is the
 one rule for whether the view goes through the model.
 
-:class:`FrameScheduler` decides when a frame is needed: a low-resolution preview
-at once after every change, the full-resolution frame once the view has rested
-for ``rest_delay_s``. :func:`adapt_preview_long_side` keeps previews within their
+When a frame is needed (a preview at once after every change, the full frame
+once the view rests) is :mod:`app.viewer.render_state`'s state machine.
+:func:`adapt_preview_long_side` keeps previews within their
 time budget (>= 10 fps) by shrinking or growing the preview size.
 """
 
@@ -269,49 +269,6 @@ def export_destination(path: str, fmt: ExportFormat) -> str:
     if fmt == "png":
         return str(p.with_suffix("")) + "/" if p.suffix else (path if path.endswith("/") else path + "/")
     return str(p.with_suffix(EXPORT_SUFFIX[fmt])) if p.suffix.lower() != EXPORT_SUFFIX[fmt] else path
-
-
-class FrameScheduler:
-    """When the live view needs a preview and when the full frame (pure bookkeeping, times passed in).
-
-    Runs on the GUI main thread only (no locks). ``version`` counts view changes;
-    a frame rendered for an older version is out of date.
-    """
-
-    def __init__(self, rest_delay_s: float = PreviewSettings().rest_delay_s) -> None:
-        self.rest_delay_s = check_range(rest_delay_s, "rest_delay_s", 0.0, 10.0)
-        self.version = 0
-        self._changed_at = -math.inf
-        self._full_requested = -1  # version whose full frame was requested
-        self._full_shown = -1  # version whose full frame is on screen
-
-    def changed(self, now: float) -> int:
-        """The view changed at ``now`` (camera, strength, style, size...): returns the new version."""
-        self.version += 1
-        self._changed_at = now
-        return self.version
-
-    def full_due(self, now: float) -> bool:
-        """True once the view has rested ``rest_delay_s`` and its full frame was not requested yet."""
-        return self._full_requested < self.version and now - self._changed_at >= self.rest_delay_s
-
-    def full_requested(self) -> None:
-        """The full frame of the current version was requested."""
-        self._full_requested = self.version
-
-    def shown(self, version: int, preview: bool) -> None:
-        """A frame of ``version`` is on screen."""
-        if not preview:
-            self._full_shown = max(self._full_shown, version)
-
-    def full_failed(self, version: int) -> None:
-        """The full frame of ``version`` could not be rendered: ask again after the next change only."""
-        self._full_shown = max(self._full_shown, version)
-
-    @property
-    def settled(self) -> bool:
-        """True when the full frame of the current version is on screen."""
-        return self._full_shown >= self.version
 
 
 def clamp_state_pose(state: ViewState, scene: OrbitScene, limits: OrbitLimits = OrbitLimits()) -> ViewState:

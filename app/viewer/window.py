@@ -44,8 +44,9 @@ from . import panel as P
 from .actions import CameraPathController, ExportController, PhotoController, ui_callback
 from .orbit import HOME, OrbitLimits, apply_drag, apply_wheel, orbit
 from .session import NO_MODEL, ViewerSession, ViewFrame
+from .render_state import RenderStateMachine
 from .state import (
-    VIEWER_MAX_SIZE, FrameScheduler, PreviewSettings, ViewState, adapt_preview_long_side, full_frame_size,
+    VIEWER_MAX_SIZE, PreviewSettings, ViewState, adapt_preview_long_side, full_frame_size,
     shows_stylized, view_camera, view_fov,
 )
 from .worker import ComputeWorker, RenderResult
@@ -95,7 +96,7 @@ class ViewerWindow:
                                strength=options.strength)
         self.limits = OrbitLimits()
         self.preview = PreviewSettings()
-        self.scheduler = FrameScheduler(self.preview.rest_delay_s)
+        self.scheduler = RenderStateMachine(self.preview.rest_delay_s)
         self.session = ViewerSession(options.model, use_model=options.use_model)
         self.worker = ComputeWorker(on_error=lambda name, e: self._post(lambda: self.show_error(name, e)))
         self.photos = PhotoController(self)
@@ -295,12 +296,17 @@ class ViewerWindow:
 
     # -- view changes and rendering -----------------------------------------------------
     def view_changed(self) -> None:
-        """The view changed: ask for a preview now; the tick asks for the full frame once it rests."""
-        self.scheduler.changed(time.monotonic())
+        """The view changed: ask for a preview now (interrupting a full render in progress); the tick asks
+        for the full frame once it rests (:class:`~app.viewer.render_state.RenderStateMachine`)."""
+        change = self.scheduler.changed(time.monotonic())
+        if change.interrupt:
+            self.worker.interrupt_render()
         self.request_render(preview=True)
 
     def request_render(self, preview: bool, camera=None) -> None:
-        """Ask the worker for a frame of the view (or of ``camera``): a preview or the full frame."""
+        """Ask the worker for a frame of the view (or of ``camera``): a preview or the full frame.
+
+        A full frame carries a cancel event: any newer request stops it between stages."""
         info = self.state.photo_info
         if info is None or self._display_hw == (0, 0):
             return
@@ -310,13 +316,19 @@ class ViewerWindow:
         stylized = shows_stylized(self.state)
         version = self.scheduler.version
         session = self.session
+        cancel = None if preview else threading.Event()
+        stop = None if cancel is None else cancel.is_set
 
         def render() -> ViewFrame:
-            return session.render_view(cam, size, display, preview=preview, stylized=stylized)
+            return session.render_view(cam, size, display, preview=preview, stylized=stylized, should_stop=stop)
+
+        def interrupted() -> None:
+            self._post(lambda: self.scheduler.full_interrupted(version))
 
         gen = self.worker.request_render(
             render, lambda res: self._post(lambda: self._on_frame(res, version)), preview=preview,
-            on_error=lambda name, e: self._post(lambda: self._on_render_failed(name, e, version, preview)))
+            on_error=lambda name, e: self._post(lambda: self._on_render_failed(name, e, version, preview)),
+            cancel=cancel, on_interrupted=None if cancel is None else interrupted)
         self._requested_at[gen] = time.perf_counter()
         if not preview and camera is None:
             self.scheduler.full_requested()

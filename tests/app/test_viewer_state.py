@@ -9,7 +9,7 @@ import torch
 
 from app.viewer.orbit import HOME, OrbitPose, OrbitScene, cam_to_world
 from app.viewer.state import (
-    VIEWER_MAX_SIZE, ExportSettings, FrameScheduler, PhotoInfo, Playback, PreviewSettings, ViewState,
+    VIEWER_MAX_SIZE, ExportSettings, PhotoInfo, Playback, PreviewSettings, ViewState,
     adapt_preview_long_side, clamp_state_pose, export_destination, fov_range, full_frame_size, playback_frame,
     shows_stylized, trajectory_cameras, user_choices, view_camera, view_fov,
 )
@@ -92,28 +92,6 @@ def test_preview_size_adapts_to_the_time_budget():
     assert side == p.min_preview_long_side
     with pytest.raises(InputError):
         PreviewSettings(preview_long_side=50, min_preview_long_side=96)
-
-
-def test_scheduler_preview_then_full_after_rest():
-    s = FrameScheduler(rest_delay_s=0.15)
-    assert s.version == 0
-    v = s.changed(10.0)
-    assert v == 1 and not s.full_due(10.1) and s.full_due(10.15)
-    s.changed(10.12)  # still moving: the rest timer restarts
-    assert not s.full_due(10.2) and s.full_due(10.3)
-    s.full_requested()
-    assert not s.full_due(11.0) and not s.settled
-    s.shown(s.version, preview=True)
-    assert not s.settled
-    s.shown(s.version, preview=False)
-    assert s.settled
-    s.changed(12.0)
-    assert not s.settled and s.full_due(12.2)
-    s.full_requested()
-    s.shown(s.version - 1, preview=False)  # an old full frame does not settle the new view
-    assert not s.settled
-    s.full_failed(s.version)
-    assert s.settled and not s.full_due(13.0)
 
 
 def test_export_destination():
