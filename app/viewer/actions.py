@@ -41,7 +41,8 @@ from . import panel as P
 from .orbit import HOME
 from .session import NO_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE, ExportJob, StylizeInfo
 from .state import (
-    LOADED_PATH, ExportSettings, PhotoInfo, Playback, export_destination, fov_range, playback_frame,
+    LOADED_PATH, ExportSettings, PhotoInfo, Playback, export_destination, export_progress_text, fov_range,
+    playback_frame,
     shows_stylized, trajectory_cameras, view_camera,
 )
 
@@ -153,7 +154,12 @@ class PhotoController(Controller):
         w = self.window
         w.state = replace(w.state, style=path)
         w.panel.style_label.text = os.path.basename(path)
-        w.set_busy("Style applied" if w.state.stylize_available else f"Style chosen ({NO_MODEL})", None)
+        if w.state.stylize_available:
+            w.set_busy("Style applied", None)
+        elif w.session.checkpoint_path() is not None:  # the model is still loading or encoding: no NO_MODEL flash
+            w.set_busy("Style chosen (shown once the model is ready)", None)
+        else:
+            w.set_busy(f"Style chosen ({NO_MODEL})", None)
         w.view_changed()
 
     def load_sample(self) -> None:
@@ -352,11 +358,14 @@ class ExportController(Controller):
         job = ExportJob(dest, self.paths.export_cameras(), frame_size(s.photo_info.size, e.size), e.fps,
                         shows_stylized(s))
         cancel = self._cancel = threading.Event()
+        t0 = time.monotonic()
+        n = len(job.cameras)
 
         def progress(done: int, total: Optional[int]) -> None:
             if cancel.is_set():
                 raise ExportCancelled(f"{dest}: export cancelled")
-            w.post(lambda: w.set_busy(f"Exporting {done}/{total} frames ...", done / max(1, total or 1)))
+            text = export_progress_text(done, total or n, time.monotonic() - t0)
+            w.post(lambda: w.set_busy(text, done / max(1, total or n)))
 
         w.panel.cancel.enabled = True
         w.panel.export.enabled = False
@@ -388,6 +397,7 @@ class ExportController(Controller):
 
     @ui_callback
     def on_cancel(self) -> None:
+        """The Cancel button: stop the running export (nothing is written)."""
         if self.exporting:
             self.cancel()
             self.window.set_status("Cancelling the export ...")

@@ -7,7 +7,7 @@ theme's font size), so the layout follows the UI scale.
 
 from __future__ import annotations
 
-from typing import List, Optional, Tuple, get_args
+from typing import Callable, List, Optional, Sequence, Tuple, get_args
 
 import open3d.visualization.gui as gui
 
@@ -36,7 +36,7 @@ EXPORT_FORMATS: Tuple[Tuple[str, str], ...] = (("mp4", "MP4 video"), ("gif", "GI
 SHORTCUTS: Tuple[Tuple[str, str], ...] = (
     ("left-drag", "orbit about the scene centre"),
     ("right-drag / shift-drag", "pan"),
-    ("wheel, + / -, PgUp / PgDn", "move forwards / backwards"),
+    ("wheel up / down, + / -, PgUp / PgDn", "move forwards / backwards"),
     ("double-click, R", "reset the view"),
     ("arrow keys", "orbit in 1-degree steps"),
     ("O / S / D", "open photo / style / depth file"),
@@ -47,8 +47,9 @@ SHORTCUTS: Tuple[Tuple[str, str], ...] = (
     ("E", "export a video"),
     ("P", "save a screenshot"),
     ("H or F1", "show / hide this help"),
-    ("Esc", "cancel the export, hide the help"),
-    ("", "(letter keys act after a click in the view)"),
+    ("Esc", "close the dialog, hide the help, stop the preview (never quits)"),
+    ("Ctrl+Q", "quit (asks first during an export)"),
+    ("", "(arrows and + / - act after a click in the view)"),
 )
 
 MENU_OPEN, MENU_STYLE, MENU_DEPTH, MENU_SAMPLE = 1, 2, 3, 4
@@ -70,7 +71,7 @@ def build_menubar() -> gui.Menu:
     file_menu.add_item("Export video...   E", MENU_EXPORT)
     file_menu.add_item("Save screenshot...   P", MENU_SCREENSHOT)
     file_menu.add_separator()
-    file_menu.add_item("Quit", MENU_QUIT)
+    file_menu.add_item("Quit   Ctrl+Q", MENU_QUIT)
     view_menu = gui.Menu()
     view_menu.add_item("Stylized   T", MENU_STYLIZED)
     view_menu.set_checked(MENU_STYLIZED, True)
@@ -84,6 +85,26 @@ def build_menubar() -> gui.Menu:
     bar.add_menu("View", view_menu)
     bar.add_menu("Help", help_menu)
     return bar
+
+
+def message_dialog(em: float, title: str, message: str,
+                   buttons: Sequence[Tuple[str, Callable[[], None]]]) -> gui.Dialog:
+    """A modal dialog: ``title``, ``message`` (wrapped by its line breaks) and a row of buttons, each
+    (label, callback); the first button is the default one."""
+    dlg = gui.Dialog(title)
+    box = gui.Vert(0.5 * em, gui.Margins(int(em), int(em), int(em), int(em)))
+    box.add_child(gui.Label(title))
+    for line in message.splitlines() or [""]:
+        box.add_child(gui.Label(line))
+    row = gui.Horiz(0.5 * em)
+    row.add_stretch()
+    for label, cb in buttons:
+        b = gui.Button(label)
+        b.set_on_clicked(cb)
+        row.add_child(b)
+    box.add_child(row)
+    dlg.add_child(box)
+    return dlg
 
 
 def _row(em: float, *widgets: gui.Widget) -> gui.Horiz:
@@ -224,7 +245,7 @@ class Panel:
         # Help overlay, drawn over the view.
         self.help = gui.Vert(0.2 * em, gui.Margins(int(em), int(em), int(em), int(em)))
         self.help.background_color = gui.Color(0.08, 0.08, 0.1, 0.88)
-        self.help.add_child(gui.Label("Keyboard and mouse  (H to close)"))
+        self.help.add_child(gui.Label("Keyboard and mouse  (H or Esc to close)"))
         grid = gui.VGrid(2, 0.3 * em)
         for key, what in SHORTCUTS:
             grid.add_child(gui.Label(key))

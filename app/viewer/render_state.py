@@ -15,7 +15,8 @@ once it rests, and any new camera change abandons a full frame in progress.
                             (or it failed: no retry until the next change)
 
 * **MOVING** ("moving preview"): the camera (or anything the view shows)
-  changed less than ``rest_delay_s`` ago. Every change asks for a preview at
+  changed less than ``rest_delay_s`` ago (``hold_delay_s`` while the mouse
+  button is held). Every change asks for a preview at
   the adaptive preview size.
 * **RESTING** ("resting preview"): the camera has rested; the full frame is
   requested and rendering while the last preview stays on screen. A change in
@@ -60,8 +61,9 @@ class Change(NamedTuple):
 class RenderStateMachine:
     """Which frame the live view needs and when (see the module docstring)."""
 
-    def __init__(self, rest_delay_s: float = 0.15) -> None:
+    def __init__(self, rest_delay_s: float = 0.15, hold_delay_s: float = 0.5) -> None:
         self.rest_delay_s = check_range(rest_delay_s, "rest_delay_s", 0.0, 10.0)
+        self.hold_delay_s = check_range(hold_delay_s, "hold_delay_s", self.rest_delay_s, 10.0)
         self.version = 0
         self.phase = RenderPhase.SETTLED
         self._changed_at = -math.inf
@@ -75,10 +77,13 @@ class RenderStateMachine:
         self.phase = RenderPhase.MOVING
         return Change(self.version, interrupt)
 
-    def full_due(self, now: float) -> bool:
-        """True once MOVING has rested ``rest_delay_s``: the caller requests the full frame, then calls
-        :meth:`full_requested`."""
-        return self.phase is RenderPhase.MOVING and now - self._changed_at >= self.rest_delay_s
+    def full_due(self, now: float, holding: bool = False) -> bool:
+        """True once MOVING has rested ``rest_delay_s`` (``hold_delay_s`` while ``holding``: the mouse
+        button is still down, a drag may go on; a busy GUI thread delivers its moves in bursts, and a
+        full frame requested between two bursts would only be interrupted by the next one). The caller
+        requests the full frame, then calls :meth:`full_requested`."""
+        delay = self.hold_delay_s if holding else self.rest_delay_s
+        return self.phase is RenderPhase.MOVING and now - self._changed_at >= delay
 
     def full_requested(self) -> None:
         """The full frame of the current version was requested: RESTING."""

@@ -25,7 +25,8 @@ size, frames, fps), ``export`` (path, wait, timeout), ``wait_export``, ``cancel_
 ``screenshot`` (path), ``grab_window`` (path: the X screen cropped to the
 window, needs Pillow with XCB), ``save_camera_path`` / ``load_camera_path``
 (path), ``help`` (visible), ``expect_error`` (contains), ``state`` (records the
-view state), ``quit``.
+view state), ``status`` (exporting, dialog open, closing, render phase),
+``resize`` (width, height), ``quit``.
 """
 
 from __future__ import annotations
@@ -312,10 +313,31 @@ class ScriptRunner:
         while time.monotonic() < t_end:
             found = [e for e in self.window.errors if contains in e]
             if found:
-                self.main(self.window.window.close_dialog)
+                self.main(self.window.close_dialog)
                 return found[-1]
             time.sleep(0.05)
         raise AssertionError(f"no error dialog containing {contains!r}; errors so far: {self.window.errors}")
+
+    def op_status(self) -> Dict[str, Any]:
+        """What the window is doing: exporting, a dialog open, closing, the status line, render counters."""
+        w = self.window
+
+        def status() -> Dict[str, Any]:
+            return {"exporting": w.exports.exporting, "dialog_open": w.dialog_open, "closing": w._closing,
+                    "status": w.panel.status.text, "phase": w.scheduler.phase.value,
+                    "interrupted": w.worker.interrupted, "help_visible": w.panel.help.visible}
+
+        return self.main(status)
+
+    def op_resize(self, width: int, height: int) -> Dict[str, Any]:
+        """Ask for a window size (as a user dragging its border would), then report the size it has."""
+        self.main(lambda: setattr(self.window.window, "size", __import__("open3d").visualization.gui.Size(
+            int(width), int(height))))
+        time.sleep(1.0)
+        self.main(self.window.window.post_redraw)
+        time.sleep(0.5)
+        r = self.main(lambda: self.window.window.size)
+        return {"width": r.width, "height": r.height}
 
     def op_state(self) -> Dict[str, Any]:
         """The user's choices in the view state (what was loaded or is playing is left out), and whether

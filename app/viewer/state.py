@@ -262,6 +262,26 @@ def adapt_preview_long_side(current: int, seconds: float, settings: PreviewSetti
     return int(min(settings.max_preview_long_side, max(settings.min_preview_long_side, nxt)))
 
 
+def wheel_ticks(wheel_dy: float, invert: bool = False) -> float:
+    """Forward wheel steps from Open3D's ``wheel_dy`` (positive for wheel up under X11, as GLFW's scroll
+    offset): wheel up moves forwards, as in common 3D viewers (Blender, MeshLab, nerfstudio); ``invert``
+    swaps it."""
+    ticks = float(wheel_dy)
+    return -ticks if invert else ticks
+
+
+def export_progress_text(done: int, total: int, elapsed_s: float) -> str:
+    """"Exporting 12/90 frames, 0:04 elapsed, about 0:26 left" (no estimate before the first frame)."""
+    def clock(seconds: float) -> str:
+        m, sec = divmod(int(round(max(0.0, seconds))), 60)
+        return f"{m}:{sec:02d}"
+
+    text = f"Exporting {done}/{total} frames, {clock(elapsed_s)} elapsed"
+    if done > 0 and total > done:
+        text += f", about {clock(elapsed_s / done * (total - done))} left"
+    return text
+
+
 def export_destination(path: str, fmt: ExportFormat) -> str:
     """``path`` with the suffix ``fmt`` needs (MP4/GIF), or a folder path for PNG frames."""
     check_choice(fmt, "export format", get_args(ExportFormat))

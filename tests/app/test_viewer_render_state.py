@@ -51,3 +51,10 @@ def test_a_failed_full_frame_settles_until_the_next_change():
     assert s.settled and not s.full_due(9.0)
     s.changed(9.0)
     assert s.full_due(9.0)
+
+
+def test_while_the_button_is_held_the_rest_takes_longer():
+    s = RenderStateMachine(rest_delay_s=0.15, hold_delay_s=0.5)
+    s.changed(0.0)
+    assert s.full_due(0.2) and not s.full_due(0.2, holding=True)  # a pause between two bursts of moves
+    assert s.full_due(0.5, holding=True)

@@ -156,3 +156,18 @@ def test_user_choices_leave_out_what_was_loaded():
     c = user_choices(s)
     assert c.photo_info is None and c.playback is None and c.loaded_path is None
     assert c.stylize_available and c.spec == s.spec and c.pose == s.pose
+
+
+def test_wheel_up_moves_forwards_unless_inverted():
+    from app.viewer.state import wheel_ticks
+
+    assert wheel_ticks(1.0) == 1.0 and wheel_ticks(-2.0) == -2.0
+    assert wheel_ticks(1.0, invert=True) == -1.0
+
+
+def test_export_progress_text_estimates_the_time_left():
+    from app.viewer.state import export_progress_text
+
+    assert export_progress_text(0, 90, 0.4) == "Exporting 0/90 frames, 0:00 elapsed"
+    assert export_progress_text(10, 90, 20.0) == "Exporting 10/90 frames, 0:20 elapsed, about 2:40 left"
+    assert export_progress_text(90, 90, 75.0) == "Exporting 90/90 frames, 1:15 elapsed"
