@@ -33,17 +33,19 @@ import open3d.visualization.gui as gui
 
 from stylize3d_core.errors import InputError
 from stylize3d_core.io.camera_path import CameraPath, load_camera_path, save_camera_path
+from stylize3d_core.io.keyframes import load_keyframes, save_keyframes
 from stylize3d_core.io.images import save_image
 from stylize3d_core.io.video import ExportCancelled
 from stylize3d_core.render.plain import frame_size
 
+from . import keyframe_edit as KE
 from . import panel as P
 from .orbit import HOME
 from .session import NO_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE, ExportJob, StylizeInfo
 from .state import (
     LOADED_PATH, ExportSettings, PhotoInfo, Playback, export_destination, export_progress_text, fov_range,
-    playback_frame,
-    shows_stylized, trajectory_cameras, view_camera,
+    path_source, playback_frame,
+    screenshot_size, shows_stylized, trajectory_cameras, view_camera,
 )
 
 if TYPE_CHECKING:
@@ -227,9 +229,11 @@ class CameraPathController(Controller):
     def on_trajectory(self, text: str, index: int) -> None:
         w = self.window
         if text == LOADED_PATH:
-            w.state = replace(w.state, use_loaded_path=True)
+            w.state = replace(w.state, use_loaded_path=True, use_keyframes=False)
         else:
-            w.state = replace(w.state, use_loaded_path=False, trajectory=replace(w.state.trajectory, name=text))
+            w.state = replace(w.state, use_loaded_path=False, use_keyframes=False,
+                              trajectory=replace(w.state.trajectory, name=text))
+        self.refresh()
 
     @ui_callback
     def on_trajectory_params(self, _value: float) -> None:
@@ -247,15 +251,29 @@ class CameraPathController(Controller):
     @ui_callback
     def toggle_preview(self) -> None:
         """Play the export's camera path in the view (the Preview button), or stop it."""
+        self.play(full=False)
+
+    @ui_callback
+    def on_preview_full(self) -> None:
+        """Play the keyframe path at full quality (frames the worker cannot keep up with are skipped)."""
+        w = self.window
+        if not self.playing:
+            w.state = replace(w.state, use_keyframes=w.state.keyframes is not None or w.state.use_keyframes)
+            self.refresh()
+        self.play(full=True)
+
+    def play(self, full: bool) -> None:
+        """Start (or stop, if playing) the camera-path preview; ``full`` renders full-quality frames."""
         w = self.window
         if w.state.photo_info is None:
             return
         if self.playing:
             self.stop()
             return
-        pb = Playback(self.export_cameras(), time.monotonic(), w.state.export.fps)
+        pb = Playback(self.export_cameras(), time.monotonic(), w.state.export.fps, full=full)
         w.state = replace(w.state, playback=pb)
         w.panel.preview_path.text = "Stop preview (C)"
+        w.panel.key_preview.text = "Stop preview"
 
     def step(self, now: float) -> None:
         """Tick: request the preview's camera for ``now``; stop at its end."""
@@ -263,19 +281,32 @@ class CameraPathController(Controller):
         pb = w.state.playback
         if pb is None:
             return
+        if pb.full:  # full quality: every frame in turn, each once the one before is on screen
+            if self._waiting:
+                return
+            i = pb.index + 1
+            if i >= len(pb.cameras):
+                self.stop()
+                return
+            w.state = replace(w.state, playback=replace(pb, index=i))
+            self._waiting = True
+            w.request_render(preview=False, camera=pb.cameras[i])
+            return
         i = playback_frame(pb, now)
         if i is None:
             self.stop()
         elif i != pb.index:
             w.state = replace(w.state, playback=replace(pb, index=i))
-            w.request_render(preview=True, camera=pb.cameras[i])
+            w.request_render(preview=not pb.full, camera=pb.cameras[i])
 
     def stop(self) -> None:
         """Stop the preview (if playing) and go back to the user's view."""
         w = self.window
+        self._waiting = False
         if w.state.playback is not None:
             w.state = replace(w.state, playback=None)
             w.panel.preview_path.text = "Preview (C)"
+            w.panel.key_preview.text = "Preview (full quality)"
             w.view_changed()
 
     # -- files --------------------------------------------------------------------------
@@ -297,7 +328,133 @@ class CameraPathController(Controller):
         w.state = replace(w.state, loaded_path=cp, use_loaded_path=True,
                           export=replace(w.state.export, fps=min(fps, 240.0)))
         p.fps.double_value = w.state.export.fps
+        w.state = replace(w.state, use_keyframes=False)
+        self.refresh()
         w.set_status(f"Camera path {os.path.basename(path)}: {len(cp.cameras)} frames")
+
+    # -- what the export follows; the keyframe editor -----------------------------------
+    def refresh(self) -> None:
+        """Show what the export follows: the trajectory's parameters only when it follows the trajectory."""
+        w = self.window
+        s, p = w.state, w.panel
+        source = path_source(s)
+        for n in (p.amp_x, p.amp_y, p.forward):
+            n.enabled = source == "trajectory"
+        p.use_keys.checked = s.use_keyframes
+        if source == "keyframes":
+            kp = s.keyframes
+            p.path_info.text = ("following the keyframes: none yet" if kp is None else
+                                f"following {len(kp.keyframes)} keyframes, {kp.duration_s:g} s")
+        elif source == "loaded":
+            n = 0 if s.loaded_path is None else len(s.loaded_path.cameras)
+            p.path_info.text = f"following the camera path file ({n} frames)"
+        else:
+            p.path_info.text = ""
+        labels = KE.keyframe_labels(s.keyframes)
+        p.key_list.set_items(labels)
+        if labels:
+            i = min(max(0, self._selected), len(labels) - 1)
+            self._selected = i
+            p.key_list.selected_index = i
+            k, d = s.keyframes.keyframes[i], s.keyframes.durations_s[i]
+            p.key_fov.double_value = k.fov_y_deg
+            p.key_seconds.double_value = d
+        p.key_loop.checked = bool(s.keyframes is not None and s.keyframes.loop)
+        for b in (p.key_up, p.key_down, p.key_delete, p.key_fov, p.key_seconds):
+            b.enabled = bool(labels)
+
+    _selected = 0
+    _waiting = False  # a full-quality preview frame is requested and not shown yet
+
+    def frame_shown(self) -> None:
+        """A frame reached the view (or failed): the full-quality preview may request the next one."""
+        self._waiting = False
+
+    def edit_keyframes(self, kp) -> None:
+        """Make ``kp`` the keyframe path (the export follows it) and show it."""
+        w = self.window
+        self.stop()
+        w.state = replace(w.state, keyframes=kp, use_keyframes=kp is not None or w.state.use_keyframes)
+        self.refresh()
+
+    @ui_callback
+    def add_keyframe(self) -> None:
+        """Add the current view as a keyframe after the selected one (K)."""
+        w = self.window
+        s = w.state
+        if s.photo_info is None:
+            return
+        cam = view_camera(s, s.photo_info.scene, s.photo_info.fov_y_deg)
+        after = self._selected if s.keyframes is not None else None
+        self._selected = 0 if s.keyframes is None else after + 1
+        self.edit_keyframes(KE.add_keyframe(s.keyframes, cam, after=after))
+        w.set_status(f"Keyframe {self._selected + 1} of {len(w.state.keyframes.keyframes)} added")
+
+    @ui_callback
+    def on_key_selected(self, _value: str, _double: bool) -> None:
+        self._selected = max(0, self.window.panel.key_list.selected_index)
+        self.refresh()
+
+    @ui_callback
+    def on_key_move(self, delta: int) -> None:
+        s = self.window.state
+        kp = KE.move_keyframe(s.keyframes, self._selected, delta)
+        self._selected = max(0, min(len(kp.keyframes) - 1, self._selected + delta))
+        self.edit_keyframes(kp)
+
+    @ui_callback
+    def on_key_delete(self) -> None:
+        kp = KE.delete_keyframe(self.window.state.keyframes, self._selected)
+        self._selected = max(0, self._selected - 1)
+        self.edit_keyframes(kp)
+
+    @ui_callback
+    def on_key_fov(self, value: float) -> None:
+        if self.window.state.keyframes is not None:
+            self.edit_keyframes(KE.set_keyframe_fov(self.window.state.keyframes, self._selected, value))
+
+    @ui_callback
+    def on_key_seconds(self, value: float) -> None:
+        if self.window.state.keyframes is not None:
+            self.edit_keyframes(KE.set_keyframe_duration(self.window.state.keyframes, self._selected, value))
+
+    @ui_callback
+    def on_key_loop(self, checked: bool) -> None:
+        self.edit_keyframes(KE.set_loop(self.window.state.keyframes, checked))
+
+    @ui_callback
+    def on_use_keys(self, checked: bool) -> None:
+        w = self.window
+        w.state = replace(w.state, use_keyframes=bool(checked))
+        self.refresh()
+
+    @ui_callback
+    def on_load_keys(self) -> None:
+        self.window.file_dialog(gui.FileDialog.OPEN, "Load keyframes", JSON_FILTERS, self.load_keyframes)
+
+    def load_keyframes(self, path: str) -> None:
+        """Read keyframes (or any camera path, as keyframes) on the worker and edit them."""
+        self.submit("load keyframes", lambda: load_keyframes(path), lambda r: self._keys_loaded(path, r))
+
+    def _keys_loaded(self, path: str, result) -> None:
+        kp, _fps = result
+        self._selected = 0
+        self.edit_keyframes(kp)
+        self.window.set_status(f"Keyframes {os.path.basename(path)}: {len(kp.keyframes)}")
+
+    @ui_callback
+    def on_save_keys(self) -> None:
+        self.window.file_dialog(gui.FileDialog.SAVE, "Save keyframes", JSON_FILTERS, self.save_keyframes)
+
+    def save_keyframes(self, path: str) -> None:
+        """Write the keyframes as camera-path JSON with their timing (on the worker)."""
+        s = self.window.state
+        if s.keyframes is None:
+            raise InputError("keyframes", "add a keyframe first (Add keyframe, K)")
+        kp, fps = s.keyframes, s.export.fps
+        size = None if s.photo_info is None else frame_size(s.photo_info.size, s.export.size)
+        self.submit("save keyframes", lambda: save_keyframes(path, kp, fps=fps, image_size=size),
+                    lambda out: self.window.set_status(f"Saved {out}"))
 
     @ui_callback
     def on_save_path(self) -> None:
@@ -409,18 +566,21 @@ class ExportController(Controller):
         self.window.file_dialog(gui.FileDialog.SAVE, "Save screenshot (PNG)", ((".png", "PNG"),), self.save_screenshot)
 
     def save_screenshot(self, path: str) -> None:
-        """Save the view at full resolution: the frame on screen once it is final, else a fresh render."""
+        """Save the view at the view's size on screen (or the panel's screenshot size): the frame on screen
+        when it is final and of that size, else a fresh full-quality render."""
         w = self.window
         s = w.state
         if s.photo_info is None:
             raise InputError("photo", "open a photo first")
         path = path if path.lower().endswith((".png", ".jpg", ".jpeg", ".webp")) else path + ".png"
+        f = w.image.frame
+        size = screenshot_size(s.photo_info.size, (f.height, f.width), int(w.panel.shot_size.int_value))
         final = w.final_frame()
-        if final is not None:
+        if final is not None and final.image.shape[:2] == size:
             image = final.image
             job = lambda: save_image(path, image)  # noqa: E731
         else:
             cam = view_camera(s, s.photo_info.scene, s.photo_info.fov_y_deg)
-            size, stylized, session = w.display_hw, shows_stylized(s), w.session
+            stylized, session = shows_stylized(s), w.session
             job = lambda: save_image(path, session.render(cam, size[0], size[1], preview=False, stylized=stylized))  # noqa: E731
         self.submit("screenshot", job, lambda _: w.set_status(f"Saved {path}"))

@@ -44,6 +44,7 @@ SHORTCUTS: Tuple[Tuple[str, str], ...] = (
     ("T", "stylized / original"),
     ("[ / ]", "strength -0.1 / +0.1"),
     ("C", "preview the camera path"),
+    ("K", "add the view as a keyframe"),
     ("E", "export a video"),
     ("P", "save a screenshot"),
     ("H or F1", "show / hide this help"),
@@ -183,6 +184,29 @@ class Panel:
         look.add_child(self.reset)
         self.root.add_child(look)
 
+        # Export.
+        export = gui.CollapsableVert("Export", 0.3 * em, gui.Margins(int(0.5 * em), 0, 0, 0))
+        self.format = gui.Combobox()
+        for _, label in EXPORT_FORMATS:
+            self.format.add_item(label)
+        export.add_child(self.format)
+        e: ExportSettings = state.export
+        grid = gui.VGrid(2, 0.3 * em)
+        self.size = _number(gui.NumberEdit.INT, e.size, 16, 4096)
+        self.frames = _number(gui.NumberEdit.INT, e.frames, 1, 10000)
+        self.fps = _number(gui.NumberEdit.DOUBLE, e.fps, 1.0, 240.0, decimals=1)
+        self.shot_size = _number(gui.NumberEdit.INT, 0, 0, 8192)
+        self.shot_size.tooltip = "long side of screenshots in pixels; 0: the view's size on screen"
+        for label, w in (("size (long side)", self.size), ("frames", self.frames), ("fps", self.fps),
+                         ("screenshot (0: view)", self.shot_size)):
+            grid.add_child(gui.Label(label))
+            grid.add_child(w)
+        export.add_child(grid)
+        self.export = gui.Button("Export... (E)")
+        self.screenshot = gui.Button("Screenshot (P)")
+        export.add_child(_row(em, self.export, self.screenshot))
+        self.root.add_child(export)
+
         # Camera path: trajectory and its parameters, preview, load / save.
         path = gui.CollapsableVert("Camera path", 0.3 * em, gui.Margins(int(0.5 * em), 0, 0, 0))
         self.trajectory = gui.Combobox()
@@ -200,6 +224,8 @@ class Panel:
             grid.add_child(gui.Label(label))
             grid.add_child(w)
         path.add_child(grid)
+        self.path_info = gui.Label("")
+        path.add_child(self.path_info)
         self.preview_path = gui.Button("Preview (C)")
         path.add_child(self.preview_path)
         self.load_path = gui.Button("Load...")
@@ -207,25 +233,34 @@ class Panel:
         path.add_child(_row(em, self.load_path, self.save_path))
         self.root.add_child(path)
 
-        # Export.
-        export = gui.CollapsableVert("Export", 0.3 * em, gui.Margins(int(0.5 * em), 0, 0, 0))
-        self.format = gui.Combobox()
-        for _, label in EXPORT_FORMATS:
-            self.format.add_item(label)
-        export.add_child(self.format)
-        e: ExportSettings = state.export
+        # Keyframe editor: keyframes from the view, their FOV and timing, loop, full-quality preview, files.
+        keys = gui.CollapsableVert("Keyframes", 0.3 * em, gui.Margins(int(0.5 * em), 0, 0, 0))
+        self.add_key = gui.Button("Add keyframe (K)")
+        self.add_key.tooltip = "add the current view as a keyframe after the selected one"
+        self.use_keys = gui.Checkbox("Export follows the keyframes")
+        keys.add_child(_row(em, self.add_key))
+        keys.add_child(self.use_keys)
+        self.key_list = gui.ListView()
+        self.key_list.set_max_visible_items(5)
+        keys.add_child(self.key_list)
+        self.key_up, self.key_down, self.key_delete = gui.Button("Up"), gui.Button("Down"), gui.Button("Delete")
+        keys.add_child(_row(em, self.key_up, self.key_down, self.key_delete))
         grid = gui.VGrid(2, 0.3 * em)
-        self.size = _number(gui.NumberEdit.INT, e.size, 16, 4096)
-        self.frames = _number(gui.NumberEdit.INT, e.frames, 1, 10000)
-        self.fps = _number(gui.NumberEdit.DOUBLE, e.fps, 1.0, 240.0, decimals=1)
-        for label, w in (("size (long side)", self.size), ("frames", self.frames), ("fps", self.fps)):
+        self.key_fov = _number(gui.NumberEdit.DOUBLE, 60.0, 1.0, 170.0, decimals=1)
+        self.key_seconds = _number(gui.NumberEdit.DOUBLE, 2.0, 0.05, 600.0, decimals=2)
+        for label, w in (("keyframe FOV", self.key_fov), ("seconds to next", self.key_seconds)):
             grid.add_child(gui.Label(label))
             grid.add_child(w)
-        export.add_child(grid)
-        self.export = gui.Button("Export... (E)")
-        self.screenshot = gui.Button("Screenshot (P)")
-        export.add_child(_row(em, self.export, self.screenshot))
-        self.root.add_child(export)
+        keys.add_child(grid)
+        self.key_loop = gui.Checkbox("Loop back to the first")
+        keys.add_child(self.key_loop)
+        self.key_preview = gui.Button("Preview (full quality)")
+        keys.add_child(self.key_preview)
+        self.key_load, self.key_save = gui.Button("Load keys..."), gui.Button("Save keys...")
+        keys.add_child(_row(em, self.key_load, self.key_save))
+        keys.set_is_open(False)
+        self.keys_section = keys
+        self.root.add_child(keys)
 
         # Status area: messages, progress, Cancel (always visible, below the scrolling panel).
         self.status_box = gui.Vert(0.3 * em, m)
@@ -256,5 +291,6 @@ class Panel:
     def set_enabled(self, photo_loaded: bool) -> None:
         """Enable the controls that need a photo."""
         for w in (self.stylized, self.strength, self.fov, self.reset, self.preview_path,
-                  self.save_path, self.load_path, self.export, self.screenshot):
+                  self.save_path, self.load_path, self.export, self.screenshot, self.add_key, self.key_preview,
+                  self.key_load, self.key_save):
             w.enabled = photo_loaded

@@ -25,6 +25,7 @@ from typing import Literal, NamedTuple, Optional, Tuple, get_args
 from stylize3d_core.checks import check_choice, check_range
 from stylize3d_core.errors import InputError
 from stylize3d_core.geometry.camera import Cameras, check_fov
+from stylize3d_core.geometry.keyframes import KeyframePath, interpolate_keyframes
 from stylize3d_core.io.camera_path import CameraPath
 from stylize3d_core.geometry.trajectories import TrajectoryName, TrajectorySettings, make_trajectory
 from stylize3d_core.io.video import MAX_GIF_FPS
@@ -120,12 +121,14 @@ class Playback:
         start: ``time.monotonic()`` when it started.
         fps: frames per second.
         index: the camera last requested (-1: none yet).
+        full: render each frame at full quality (the keyframe editor's preview) instead of as a preview.
     """
 
     cameras: Cameras
     start: float
     fps: float
     index: int = -1
+    full: bool = False
 
     def __post_init__(self) -> None:
         check_range(self.fps, "playback fps", 1e-3, 1000.0)
@@ -154,6 +157,9 @@ class ViewState:
         pose: the camera relative to the input view.
         trajectory: the camera-path shape and its parameters (frames come from ``export``).
         use_loaded_path: follow the camera path loaded from JSON instead of ``trajectory``.
+        keyframes: the keyframe editor's path, or None (no keyframe yet).
+        use_keyframes: follow the keyframe path (at ``export.fps``) instead of the trajectory or the
+            loaded path.
         export: export settings.
 
     What was loaded and what is playing:
@@ -174,6 +180,8 @@ class ViewState:
     pose: OrbitPose = HOME
     trajectory: TrajectorySettings = field(default_factory=TrajectorySettings)
     use_loaded_path: bool = False
+    keyframes: Optional[KeyframePath] = None
+    use_keyframes: bool = False
     export: ExportSettings = field(default_factory=ExportSettings)
     photo_info: Optional[PhotoInfo] = None
     stylize_available: bool = False
@@ -197,7 +205,7 @@ def shows_stylized(state: ViewState) -> bool:
 
 def user_choices(state: ViewState) -> ViewState:
     """``state`` without what was loaded or is playing (for reports: no arrays, no cameras)."""
-    return replace(state, photo_info=None, loaded_path=None, playback=None)
+    return replace(state, photo_info=None, loaded_path=None, playback=None, keyframes=None)
 
 
 def view_fov(state: ViewState, photo_fov_deg: float) -> float:
@@ -220,11 +228,16 @@ def trajectory_cameras(state: ViewState, scene: OrbitScene, photo_fov_deg: float
                        loaded: Optional[Cameras] = None) -> Cameras:
     """The cameras "Export" renders.
 
-    The loaded camera path as it is, when ``state.use_loaded_path``; else the
+    The keyframe path sampled at ``state.export.fps``, when ``state.use_keyframes``;
+    the loaded camera path as it is, when ``state.use_loaded_path``; else the
     trajectory with ``state.export.frames`` frames and the view's FOV, started
     from the current view (each trajectory pose is composed with the orbit pose,
     so the video moves around what the user is looking at).
     """
+    if state.use_keyframes:
+        if state.keyframes is None:
+            raise InputError("keyframes", "add a keyframe first (Add keyframe, K)")
+        return interpolate_keyframes(state.keyframes, state.export.fps)
     if state.use_loaded_path:
         if loaded is None:
             raise InputError("camera path", "no camera path is loaded")
@@ -240,6 +253,14 @@ def full_frame_size(photo_hw: Tuple[int, int], view_hw: Tuple[int, int], cap: in
     fit = min(vh / h, vw / w)  # scale at which the photo fills the view
     long_side = int(min(cap, max(32, math.floor(fit * max(h, w)))))
     return frame_size(photo_hw, long_side)
+
+
+def screenshot_size(photo_hw: Tuple[int, int], view_hw: Tuple[int, int], long_side: int = 0) -> Tuple[int, int]:
+    """(H, W) of a screenshot: ``long_side`` (the photo's aspect) if > 0, else the view's size on screen
+    (the photo fitted into ``view_hw``, no cap)."""
+    if long_side and long_side > 0:
+        return frame_size(photo_hw, int(min(8192, max(16, long_side))))
+    return full_frame_size(photo_hw, view_hw, 8192)
 
 
 def adapt_preview_long_side(current: int, seconds: float, settings: PreviewSettings = PreviewSettings()) -> int:
@@ -280,6 +301,13 @@ def export_progress_text(done: int, total: int, elapsed_s: float) -> str:
     if done > 0 and total > done:
         text += f", about {clock(elapsed_s / done * (total - done))} left"
     return text
+
+
+def path_source(state: ViewState) -> str:
+    """What the export follows: "keyframes", "loaded" (a camera-path file) or "trajectory"."""
+    if state.use_keyframes:
+        return "keyframes"
+    return "loaded" if state.use_loaded_path else "trajectory"
 
 
 def export_destination(path: str, fmt: ExportFormat) -> str:

@@ -173,10 +173,23 @@ class ViewerWindow:
         p.format.set_on_selection_changed(ex.on_export_params)
         for n in (p.size, p.frames, p.fps):
             n.set_on_value_changed(ex.on_export_params)
+        p.add_key.set_on_clicked(cp.add_keyframe)
+        p.use_keys.set_on_checked(cp.on_use_keys)
+        p.key_list.set_on_selection_changed(cp.on_key_selected)
+        p.key_up.set_on_clicked(lambda: cp.on_key_move(-1))
+        p.key_down.set_on_clicked(lambda: cp.on_key_move(1))
+        p.key_delete.set_on_clicked(cp.on_key_delete)
+        p.key_fov.set_on_value_changed(cp.on_key_fov)
+        p.key_seconds.set_on_value_changed(cp.on_key_seconds)
+        p.key_loop.set_on_checked(cp.on_key_loop)
+        p.key_preview.set_on_clicked(cp.on_preview_full)
+        p.key_load.set_on_clicked(cp.on_load_keys)
+        p.key_save.set_on_clicked(cp.on_save_keys)
         p.export.set_on_clicked(ex.on_export)
         p.screenshot.set_on_clicked(ex.on_screenshot)
         p.cancel.set_on_clicked(ex.on_cancel)
         p.set_enabled(False)
+        cp.refresh()
         menu = {
             P.MENU_OPEN: ph.on_open_photo, P.MENU_STYLE: ph.on_open_style, P.MENU_DEPTH: ph.on_open_depth,
             P.MENU_SAMPLE: ph.on_sample, P.MENU_LOAD_PATH: cp.on_load_path, P.MENU_SAVE_PATH: cp.on_save_path,
@@ -360,7 +373,8 @@ class ViewerWindow:
     def request_render(self, preview: bool, camera=None) -> None:
         """Ask the worker for a frame of the view (or of ``camera``): a preview or the full frame.
 
-        A full frame carries a cancel event: any newer request stops it between stages."""
+        The view's full frame carries a cancel event: any newer request stops it between stages (a
+        full-quality frame of a ``camera`` -- the keyframe preview -- does not)."""
         info = self.state.photo_info
         if info is None or self._display_hw == (0, 0):
             return
@@ -370,7 +384,7 @@ class ViewerWindow:
         stylized = shows_stylized(self.state)
         version = self.scheduler.version
         session = self.session
-        cancel = None if preview else threading.Event()
+        cancel = None if preview or camera is not None else threading.Event()
         stop = None if cancel is None else cancel.is_set
 
         def render() -> ViewFrame:
@@ -396,6 +410,7 @@ class ViewerWindow:
         self.window.post_redraw()
         self._shown = frame
         self.scheduler.shown(version, res.preview)
+        self.paths.frame_shown()
         now = time.perf_counter()
         latency = now - self._requested_at.pop(res.generation, now)
         for g in [g for g in self._requested_at if g < res.generation]:
@@ -427,6 +442,7 @@ class ViewerWindow:
         self.panel.fps_label.text = text
 
     def _on_render_failed(self, name: str, e: BaseException, version: int, preview: bool) -> None:
+        self.paths.frame_shown()
         if not preview:
             self.scheduler.full_failed(version)
         self.show_error(name, e)
@@ -553,7 +569,7 @@ class ViewerWindow:
         return {
             K.O: ph.on_open_photo, K.S: ph.on_open_style, K.D: ph.on_open_depth, K.M: ph.load_sample,
             K.T: self._on_stylized_menu, K.R: self.reset_view, K.C: cp.toggle_preview, K.E: ex.on_export,
-            K.P: ex.on_screenshot, K.H: self._on_help,
+            K.P: ex.on_screenshot, K.H: self._on_help, K.K: cp.add_keyframe,
             K.LEFT_BRACKET: lambda: self.set_strength(self.state.strength - 0.1),
             K.RIGHT_BRACKET: lambda: self.set_strength(self.state.strength + 0.1),
         }

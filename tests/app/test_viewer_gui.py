@@ -434,3 +434,48 @@ def test_real_events_second_drag_shows_frames_esc_and_close_during_export(displa
     asked = step(report, "status", 2)["result"]
     assert asked["dialog_open"] and asked["exporting"] and not asked["closing"], asked
     assert not (out / "long.mp4").exists()  # quitting from the script cancelled it: nothing written
+
+
+def test_keyframe_editor_builds_a_path_exports_it_and_round_trips(display, tmp_path):
+    keys = tmp_path / "keys.json"
+    steps = [
+        {"op": "load_sample"},
+        {"op": "wait_idle", "timeout": 120},
+        {"op": "add_keyframe"},
+        {"op": "orbit", "dx": 80, "dy": 0, "steps": 8},
+        {"op": "add_keyframe"},
+        {"op": "orbit", "dx": -40, "dy": 30, "steps": 8},
+        {"op": "wheel", "ticks": 2},
+        {"op": "add_keyframe"},
+        {"op": "edit_keyframe", "index": 0, "seconds": 0.5},
+        {"op": "edit_keyframe", "index": 1, "fov": 45.0, "seconds": 0.25},
+        {"op": "edit_keyframe", "index": 2, "move": -1},
+        {"op": "edit_keyframe", "index": 0, "loop": True},
+        {"op": "set_export", "size": 96, "fps": 8, "format": "gif"},
+        {"op": "preview_keys"},
+        {"op": "export", "path": str(tmp_path / "keys.gif")},
+        {"op": "save_keyframes", "path": str(keys)},
+        {"op": "edit_keyframe", "index": 0, "delete": True},
+        {"op": "load_keyframes", "path": str(keys)},
+        {"op": "edit_keyframe", "index": 0},
+        {"op": "open_section"},
+        {"op": "wait_idle"},
+        {"op": "grab_window", "path": str(tmp_path / "editor.png")},
+        {"op": "resize", "width": 300, "height": 200},
+        {"op": "quit"},
+    ]
+    code, report = run_viewer(display, tmp_path, steps, ["--no-model"])
+    check_ran(code, report)
+    assert step(report, "add_keyframe", 2)["result"]["keyframes"] == 3
+    looped = step(report, "edit_keyframe", 3)["result"]
+    assert looped["loop"] and looped["use_keyframes"] and looped["durations_s"] == [0.5, 2.0, 0.25]
+    assert step(report, "preview_keys")["result"]["full_frames_shown"] > 0
+    # 0.5 + 2.0 + 0.25 s of loop at 8 fps: 22 frames in the GIF.
+    with Image.open(tmp_path / "keys.gif") as gif:
+        assert gif.n_frames > 1
+    doc = json.loads(keys.read_text())
+    assert doc["format"] == "stylize3d-camera-path" and len(doc["frames"]) == 3
+    assert doc["keyframes"] == {"durations_s": [0.5, 2.0, 0.25], "loop": True}
+    assert step(report, "edit_keyframe", 5)["result"]["keyframes"] == 3  # loaded back after a delete
+    size = step(report, "resize")["result"]
+    assert size["width"] >= 640 and size["height"] >= 480, f"no minimum window size: {size}"
