@@ -444,7 +444,8 @@ class CameraPathController(Controller):
 
     @ui_callback
     def on_save_keys(self) -> None:
-        self.window.file_dialog(gui.FileDialog.SAVE, "Save keyframes", JSON_FILTERS, self.save_keyframes)
+        self.window.file_dialog(gui.FileDialog.SAVE, "Save keyframes", JSON_FILTERS, self.save_keyframes,
+                                "keyframes.json")
 
     def save_keyframes(self, path: str) -> None:
         """Write the keyframes as camera-path JSON with their timing (on the worker)."""
@@ -458,7 +459,8 @@ class CameraPathController(Controller):
 
     @ui_callback
     def on_save_path(self) -> None:
-        self.window.file_dialog(gui.FileDialog.SAVE, "Save camera path", JSON_FILTERS, self.save_camera_path)
+        self.window.file_dialog(gui.FileDialog.SAVE, "Save camera path", JSON_FILTERS, self.save_camera_path,
+                                "camera_path.json")
 
     def save_camera_path(self, path: str) -> None:
         """Write the export's cameras as camera-path JSON (on the worker)."""
@@ -500,7 +502,8 @@ class ExportController(Controller):
         if w.state.photo_info is None or self.exporting:
             return
         fmt = w.state.export.format
-        w.file_dialog(gui.FileDialog.SAVE, f"Export ({fmt.upper()})", (), self.start_export)
+        w.file_dialog(gui.FileDialog.SAVE, f"Export ({fmt.upper()})", (), self.start_export,
+                      export_destination("stylized.mp4", fmt).rstrip("/"))
 
     def start_export(self, path: str) -> str:
         """Export the camera path to ``path`` on the worker, with progress and Cancel; returns the destination."""
@@ -563,7 +566,8 @@ class ExportController(Controller):
     def on_screenshot(self) -> None:
         if self.window.state.photo_info is None:
             return
-        self.window.file_dialog(gui.FileDialog.SAVE, "Save screenshot (PNG)", ((".png", "PNG"),), self.save_screenshot)
+        self.window.file_dialog(gui.FileDialog.SAVE, "Save screenshot (PNG)", ((".png", "PNG"),), self.save_screenshot,
+                                "screenshot.png")
 
     def save_screenshot(self, path: str) -> None:
         """Save the view at the view's size on screen (or the panel's screenshot size): the frame on screen

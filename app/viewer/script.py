@@ -28,7 +28,8 @@ window, needs Pillow with XCB), ``save_camera_path`` / ``load_camera_path``
 view state), ``status`` (exporting, dialog open, closing, render phase),
 ``resize`` (width, height), ``add_keyframe``, ``edit_keyframe`` (index, fov,
 seconds, move, delete, loop), ``save_keyframes`` / ``load_keyframes`` (path),
-``preview_keys``, ``open_section`` (name), ``quit``.
+``preview_keys``, ``open_section`` (name), ``save_as`` (what, text: types a
+path into a Save dialog), ``quit``.
 """
 
 from __future__ import annotations
@@ -330,6 +331,23 @@ class ScriptRunner:
                     "interrupted": w.worker.interrupted, "help_visible": w.panel.help.visible}
 
         return self.main(status)
+
+    def op_save_as(self, what: str, text: str) -> Dict[str, Any]:
+        """Open a Save dialog ("screenshot", "camera_path", "export") as its shortcut does, type ``text``
+        in its path field and press Save."""
+        w = self.window
+        opener = {"screenshot": w.exports.on_screenshot, "camera_path": w.paths.on_save_path,
+                  "export": w.exports.on_export}[what]
+        self.main(opener)
+
+        def type_and_save() -> bool:
+            w.save_as_edit.text_value = text
+            w._save_as_ok()
+            return w.dialog_open
+
+        still_open = self.main(type_and_save)
+        self.op_wait_worker()
+        return {"dialog_open": still_open, "status": self.main(lambda: w.panel.status.text)}
 
     def op_add_keyframe(self) -> Dict[str, Any]:
         """Add the current view as a keyframe (the K key / Add keyframe button)."""

@@ -18,6 +18,7 @@ time budget (~24 fps) by shrinking or growing the preview size.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Literal, NamedTuple, Optional, Tuple, get_args
@@ -309,6 +310,18 @@ def path_source(state: ViewState) -> str:
     if state.use_keyframes:
         return "keyframes"
     return "loaded" if state.use_loaded_path else "trajectory"
+
+
+def resolve_typed_path(text: str, folder: Optional[str]) -> str:
+    """The file a typed path names: ``~`` expanded; an absolute path as it is; a relative one inside
+    ``folder`` (the dialog's folder; the working directory if None)."""
+    t = os.path.expanduser(str(text).strip())
+    if not t:
+        raise InputError("file name", "type a file name or path")
+    if os.path.isabs(t):
+        return os.path.normpath(t) + ("/" if t.endswith("/") else "")
+    base = folder or os.getcwd()
+    return os.path.normpath(os.path.join(base, t)) + ("/" if t.endswith("/") else "")
 
 
 def export_destination(path: str, fmt: ExportFormat) -> str:

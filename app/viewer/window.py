@@ -48,7 +48,7 @@ from .session import NO_MODEL, ViewerSession, ViewFrame
 from .render_state import RenderStateMachine
 from .state import (
     VIEWER_MAX_SIZE, PreviewSettings, ViewState, adapt_preview_long_side, full_frame_size,
-    shows_stylized, view_camera, view_fov, wheel_ticks,
+    resolve_typed_path, shows_stylized, view_camera, view_fov, wheel_ticks,
 )
 from .worker import ComputeWorker, RenderResult
 
@@ -340,25 +340,66 @@ class ViewerWindow:
             self.panel.status.text = text
         self.panel.progress.value = 0.0 if fraction is None else float(min(1.0, max(0.0, fraction)))
 
-    def file_dialog(self, mode, title: str, filters, on_done: Callable[[str], None]) -> None:
-        """Show a file dialog; ``on_done(path)`` runs when a file is chosen (its errors become a dialog)."""
+    def file_dialog(self, mode, title: str, filters, on_done: Callable[[str], None], default_name: str = "") -> None:
+        """Choose a file; ``on_done(path)`` runs with it (its errors become a dialog). Open uses Open3D's
+        file browser in the last used folder; Save asks for a typed path first (absolute, ``~/...``, or
+        relative to the last used folder), with Browse... for the file browser."""
+        if mode == gui.FileDialog.SAVE:
+            self._save_as(title, filters, on_done, default_name)
+        else:
+            self._browse(mode, title, filters, on_done)
+
+    def _run_chosen(self, title: str, on_done: Callable[[str], None], path: str) -> None:
+        self.close_dialog()
+        self.last_folder = os.path.dirname(path.rstrip("/")) or self.last_folder
+        try:
+            on_done(path)
+        except Exception as e:  # reported to the user; the session stays usable
+            self.show_error(title, e)
+
+    def _browse(self, mode, title: str, filters, on_done: Callable[[str], None]) -> None:
         dlg = gui.FileDialog(mode, title, self.window.theme)
         for ext, desc in filters:
             dlg.add_filter(ext, desc)
-
         if self.last_folder:
             dlg.set_path(self.last_folder)
-
-        def done(path: str) -> None:
-            self.close_dialog()
-            self.last_folder = os.path.dirname(path) or self.last_folder
-            try:
-                on_done(path)
-            except Exception as e:  # reported to the user; the session stays usable
-                self.show_error(title, e)
-
         dlg.set_on_cancel(self.close_dialog)
-        dlg.set_on_done(done)
+        dlg.set_on_done(lambda path: self._run_chosen(title, on_done, path))
+        self.show_dialog(dlg)
+
+    def _save_as(self, title: str, filters, on_done: Callable[[str], None], default_name: str) -> None:
+        folder = self.last_folder or os.getcwd()
+        em = self.em
+        dlg = gui.Dialog(title)
+        box = gui.Vert(0.5 * em, gui.Margins(int(em), int(em), int(em), int(em)))
+        box.add_child(gui.Label(title))
+        box.add_child(gui.Label(f"in {folder}"))
+        edit = gui.TextEdit()
+        edit.text_value = os.path.join(folder, default_name) if default_name else folder + os.sep
+        edit.tooltip = "an absolute path, ~/..., or a path relative to the folder above"
+        box.add_child(edit)
+        self.save_as_edit = edit  # (test hooks type into it)
+
+        def save() -> None:
+            try:
+                path = resolve_typed_path(edit.text_value, folder)
+            except InputError as e:
+                self.show_error(title, e)
+                return
+            self._run_chosen(title, on_done, path)
+
+        def browse() -> None:
+            self.close_dialog()
+            self._browse(gui.FileDialog.SAVE, title, filters, on_done)
+
+        row = gui.Horiz(0.5 * em)
+        for label, cb in (("Browse...", browse), ("Cancel", self.close_dialog), ("Save", save)):
+            b = gui.Button(label)
+            b.set_on_clicked(cb)
+            row.add_child(b)
+        box.add_child(row)
+        dlg.add_child(box)
+        self._save_as_ok = save  # (test hooks press Save)
         self.show_dialog(dlg)
 
     # -- view changes and rendering -----------------------------------------------------

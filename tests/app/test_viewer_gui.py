@@ -461,6 +461,8 @@ def test_keyframe_editor_builds_a_path_exports_it_and_round_trips(display, tmp_p
         {"op": "open_section"},
         {"op": "wait_idle"},
         {"op": "grab_window", "path": str(tmp_path / "editor.png")},
+        {"op": "save_as", "what": "screenshot", "text": str(tmp_path / "typed.png")},  # an absolute path
+        {"op": "save_as", "what": "screenshot", "text": "relative.png"},  # in the folder used last
         {"op": "resize", "width": 300, "height": 200},
         {"op": "quit"},
     ]
@@ -477,5 +479,8 @@ def test_keyframe_editor_builds_a_path_exports_it_and_round_trips(display, tmp_p
     assert doc["format"] == "stylize3d-camera-path" and len(doc["frames"]) == 3
     assert doc["keyframes"] == {"durations_s": [0.5, 2.0, 0.25], "loop": True}
     assert step(report, "edit_keyframe", 5)["result"]["keyframes"] == 3  # loaded back after a delete
+    assert (tmp_path / "typed.png").is_file() and (tmp_path / "relative.png").is_file()
+    shot = Image.open(tmp_path / "typed.png")
+    assert shot.width > 768, f"the screenshot is not at the view's size: {shot.size}"  # the view is ~944 px wide
     size = step(report, "resize")["result"]
     assert size["width"] >= 640 and size["height"] >= 480, f"no minimum window size: {size}"

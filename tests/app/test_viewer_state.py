@@ -171,3 +171,17 @@ def test_export_progress_text_estimates_the_time_left():
     assert export_progress_text(0, 90, 0.4) == "Exporting 0/90 frames, 0:00 elapsed"
     assert export_progress_text(10, 90, 20.0) == "Exporting 10/90 frames, 0:20 elapsed, about 2:40 left"
     assert export_progress_text(90, 90, 75.0) == "Exporting 90/90 frames, 1:15 elapsed"
+
+
+def test_typed_paths_absolute_home_and_relative(tmp_path):
+    import os
+
+    from app.viewer.state import resolve_typed_path
+
+    assert resolve_typed_path("/tmp/x.mp4", str(tmp_path)) == "/tmp/x.mp4"
+    assert resolve_typed_path("  clips/x.mp4 ", str(tmp_path)) == str(tmp_path / "clips" / "x.mp4")
+    assert resolve_typed_path("../y.png", str(tmp_path / "a")) == str(tmp_path / "y.png")
+    assert resolve_typed_path("~/z.json", None) == os.path.join(os.path.expanduser("~"), "z.json")
+    assert resolve_typed_path("frames/", str(tmp_path)).endswith("/frames/")
+    with pytest.raises(InputError, match="file name"):
+        resolve_typed_path("   ", None)
