@@ -9,6 +9,7 @@ what changes           what is recomputed                           typical cost
 photo                  geometry (NDC, FPS, ball queries, 3-NN),     seconds
                        content features
 style                  style CNN features, AdaAttN                  < 1 s
+second style / mix     (its features once) then a blend             ~0.1 s (at the next render)
 strength               blend + IDW upsampling to every point        ~0.1 s (at the next render)
 camera                 rasterize + U-Net decode                     see benchmarks
 =====================  ==========================================  ==================
@@ -119,6 +120,8 @@ class Stylized3DPhoto:
         self._order = random_order(self._geom.xyz.shape[0], settings.seed)  # (N,)
         self._xyz = self._geom.xyz.index_select(0, self._order).contiguous()  # (N, 3), random order
         self._stylized: Optional[torch.Tensor] = None  # (M, C) at strength 1
+        self._stylized2: Optional[torch.Tensor] = None  # (M, C) of the second style, at strength 1
+        self._mix = 0.0
         self._dense: Optional[torch.Tensor] = None  # (N, Cr) in self._order
         self._strength = settings.strength
         self.timings.update({"geometry": t1 - t0, "encode": t2 - t1})
@@ -157,6 +160,26 @@ class Stylized3DPhoto:
             self.timings["style"] = time.perf_counter() - t0
         self._dense = None
 
+    def set_second_style(self, style_rgb: Optional[np.ndarray]) -> None:
+        """A second style image to mix with the first (None removes it); see :meth:`set_mix`."""
+        if style_rgb is None:
+            self._stylized2 = None
+        else:
+            with torch.inference_mode():
+                maps = self._encoder()(style_tensor(style_rgb, "second style image")).maps
+                self._stylized2 = self.model.stylizer.stylize(self._content, maps)  # (M, C)
+        self._dense = None
+
+    def set_mix(self, mix: float) -> None:
+        """Mix of the two styles in [0, 1]: 0 the first, 1 the second. Cheap: the stylizer's outputs for
+        both are kept and blended (no re-encoding, no new style features)."""
+        self._mix = check_range(mix, "style mix", 0.0, 1.0)
+        self._dense = None
+
+    @property
+    def mix(self) -> float:
+        return self._mix
+
     def set_strength(self, strength: float) -> None:
         """Change the style strength in [0, 1] (cheap: no re-encoding, no new style features)."""
         self._strength = check_range(strength, "strength", 0.0, 1.0)
@@ -165,10 +188,13 @@ class Stylized3DPhoto:
     def _update_dense(self) -> None:
         t0 = time.perf_counter()
         with torch.inference_mode():
-            if self._stylized is None or self._strength == 0.0:
+            stylized = self._stylized
+            if stylized is not None and self._stylized2 is not None and self._mix > 0.0:
+                stylized = torch.lerp(stylized, self._stylized2, self._mix)
+            if stylized is None or self._strength == 0.0:
                 sparse = self._content
             else:
-                sparse = blend(self._content, self._stylized, self._strength)
+                sparse = blend(self._content, stylized, self._strength)
             dense = self.model.dense_features(sparse, self._geom)  # (N, Cr)
             self._dense = dense.index_select(0, self._order).contiguous()
         self.timings["upsample"] = time.perf_counter() - t0

@@ -27,6 +27,7 @@ import threading
 import time
 import traceback
 from dataclasses import replace
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Optional
 
 import open3d.visualization.gui as gui
@@ -44,7 +45,7 @@ from .orbit import HOME
 from .session import NO_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE, ExportJob, StylizeInfo
 from .state import (
     LOADED_PATH, ExportSettings, PhotoInfo, Playback, export_destination, export_progress_text, fov_range,
-    path_source, playback_frame,
+    path_source, playback_frame, push_recent,
     screenshot_size, shows_stylized, trajectory_cameras, view_camera,
 )
 
@@ -96,8 +97,48 @@ class Controller:
                         on_error=lambda n, e: w.post(lambda: self.task_failed(n, e)), key=key)
 
 
+def style_thumbnail(path: str, px: int = P.THUMB_PX):
+    """A (px, px, 3) uint8 centre crop of an image file, for the style strip; None if it cannot be read."""
+    import cv2
+    import numpy as np
+
+    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if bgr is None:
+        return None
+    h, w = bgr.shape[:2]
+    side = min(h, w)
+    crop = bgr[(h - side) // 2:(h - side) // 2 + side, (w - side) // 2:(w - side) // 2 + side]
+    return np.ascontiguousarray(cv2.resize(crop, (px, px), interpolation=cv2.INTER_AREA)[:, :, ::-1])
+
+
+BUNDLED_STYLES = tuple(sorted(str(p) for p in Path(str(SAMPLE_STYLE)).parent.glob("*.jpg")))
+"""The style images shipped in ``assets/styles`` (the style strip shows them first)."""
+MAX_STRIP = 12
+
+
 class PhotoController(Controller):
-    """Photos, styles, the depth source and its edge alignment, the sample, encoding for the model."""
+    """Photos, styles, the depth source and its edge alignment, the sample, encoding for the model; recent
+    photos, the style strip (bundled and recently used styles), a second style and its mix."""
+
+    def __init__(self, window: "ViewerWindow") -> None:
+        super().__init__(window)
+        self.recent_photos: tuple = ()
+        self._strip: list = []
+
+    def build_strip(self) -> None:
+        """Thumbnails of the bundled styles (main thread, at start)."""
+        for path in BUNDLED_STYLES:
+            self._add_to_strip(path)
+
+    def _add_to_strip(self, path: str) -> None:
+        if path in self._strip or len(self._strip) >= MAX_STRIP:
+            return
+        thumb = style_thumbnail(path)
+        if thumb is None:
+            return
+        self._strip.append(path)
+        self.window.panel.add_style_thumbnail(thumb, os.path.basename(path), lambda: self.open_style(path))
+        self.window.window.set_needs_layout()
 
     def open_photo(self, path: str, depth: Optional[str] = None) -> None:
         """Build the 3D photo of ``path`` on the worker with the state's photo spec (and ``depth``, if
@@ -115,6 +156,13 @@ class PhotoController(Controller):
 
     def _loaded(self, info: PhotoInfo, spec: "PhotoSpec") -> None:
         w = self.window
+        self.recent_photos = push_recent(self.recent_photos, str(spec.photo))
+        combo = w.panel.recent_photos
+        combo.clear_items()
+        combo.add_item(P.RECENT_PHOTOS)
+        for path in self.recent_photos:
+            combo.add_item(os.path.basename(path))
+        combo.selected_index = 0
         w.state = replace(w.state, spec=spec, photo_info=info, stylize_available=False, pose=HOME, view_fov=None)
         p = w.panel
         h, wd = info.size
@@ -155,6 +203,7 @@ class PhotoController(Controller):
     def _style_loaded(self, path: str) -> None:
         w = self.window
         w.state = replace(w.state, style=path)
+        self._add_to_strip(str(path))
         w.panel.style_label.text = os.path.basename(path)
         if w.state.stylize_available:
             w.set_busy("Style applied", None)
@@ -163,6 +212,43 @@ class PhotoController(Controller):
         else:
             w.set_busy(f"Style chosen ({NO_MODEL})", None)
         w.view_changed()
+
+    @ui_callback
+    def on_recent_photo(self, _text: str, index: int) -> None:
+        if 1 <= index <= len(self.recent_photos):
+            self.open_photo(self.recent_photos[index - 1])
+
+    def open_second_style(self, path: Optional[str]) -> None:
+        """Read a second style image on the worker to mix with the first (None removes it)."""
+        w = self.window
+        session = w.session
+        self.submit("open second style", lambda: session.load_second_style(path),
+                    lambda _hw: self._style2_loaded(path), key="style2")
+
+    def _style2_loaded(self, path: Optional[str]) -> None:
+        w = self.window
+        w.state = replace(w.state, style2=path)
+        w.panel.style2_label.text = "no second style" if path is None else os.path.basename(path)
+        w.set_status("Second style chosen: move Mix to blend" if path else "Second style removed")
+        w.view_changed()
+
+    def set_mix(self, value: float) -> None:
+        """Mix of the two styles in [0, 1] (a re-blend on the worker, then a new frame)."""
+        w = self.window
+        m = float(min(1.0, max(0.0, value)))
+        w.state = replace(w.state, mix=m)
+        if abs(w.panel.mix.double_value - m) > 1e-9:
+            w.panel.mix.double_value = m
+        w.worker.submit("mix", lambda: w.session.set_mix(m), key="mix")
+        w.view_changed()
+
+    @ui_callback
+    def on_open_style2(self) -> None:
+        self.window.file_dialog(gui.FileDialog.OPEN, "Second style image", IMAGE_FILTERS, self.open_second_style)
+
+    @ui_callback
+    def on_mix(self, value: float) -> None:
+        self.set_mix(value)
 
     def load_sample(self) -> None:
         """Open the bundled sample photo and style."""

@@ -53,6 +53,12 @@ SHORTCUTS: Tuple[Tuple[str, str], ...] = (
     ("", "(arrows and + / - act after a click in the view)"),
 )
 
+RECENT_PHOTOS = "Recent photos..."
+THUMBS_PER_ROW = 4
+THUMB_PX = 44
+SLIDER_TRACK = gui.Color(0.32, 0.32, 0.36, 1.0)
+"""Background of the sliders: Open3D's dark theme draws their track in the panel's colour (invisible)."""
+
 MENU_OPEN, MENU_STYLE, MENU_DEPTH, MENU_SAMPLE = 1, 2, 3, 4
 MENU_LOAD_PATH, MENU_SAVE_PATH, MENU_EXPORT, MENU_SCREENSHOT, MENU_QUIT = 5, 6, 7, 8, 9
 MENU_STYLIZED, MENU_RESET, MENU_PREVIEW, MENU_HELP, MENU_ABOUT = 10, 11, 12, 13, 14
@@ -148,21 +154,39 @@ class Panel:
         photo.add_child(_row(em, self.open_photo, self.sample))
         self.photo_label = gui.Label("no photo")
         photo.add_child(self.photo_label)
+        self.recent_photos = gui.Combobox()
+        self.recent_photos.add_item(RECENT_PHOTOS)
+        self.recent_photos.tooltip = "photos opened in this session"
+        photo.add_child(self.recent_photos)
         self.depth = gui.Combobox()
         for _, label in DEPTH_CHOICES:
             self.depth.add_item(label)
         self.depth_file = gui.Button("Depth file...")
-        photo.add_child(gui.Label("Depth"))
-        photo.add_child(self.depth)
-        photo.add_child(self.depth_file)
+        depth = gui.CollapsableVert("Depth", 0.3 * em, gui.Margins(int(0.5 * em), 0, 0, 0))
+        depth.add_child(self.depth)
+        depth.add_child(self.depth_file)
         self.refine = gui.Combobox()
         for _, label in REFINE_CHOICES:
             self.refine.add_item(label)
-        photo.add_child(self.refine)
+        depth.add_child(self.refine)
+        depth.set_is_open(False)  # rarely changed: keeps Export above the fold
+        photo.add_child(depth)
         self.open_style = gui.Button("Open style...")
         photo.add_child(self.open_style)
         self.style_label = gui.Label("no style")
         photo.add_child(self.style_label)
+        photo.add_child(gui.Label("Styles (click to apply)"))
+        self.style_strip = gui.VGrid(THUMBS_PER_ROW, 0.25 * em)
+        photo.add_child(self.style_strip)
+        self.open_style2 = gui.Button("Mix with...")
+        self.open_style2.tooltip = "a second style image to mix with the first"
+        self.style2_label = gui.Label("no second style")
+        photo.add_child(_row(em, self.open_style2, self.style2_label))
+        self.mix = gui.Slider(gui.Slider.DOUBLE)
+        self.mix.set_limits(0.0, 1.0)
+        self.mix.double_value = state.mix
+        self.mix.tooltip = "0: the first style, 1: the second"
+        photo.add_child(self.mix)
         self.root.add_child(photo)
 
         # Look: stylized / original, strength, FOV, reset.
@@ -180,8 +204,16 @@ class Panel:
         self.fov.set_limits(30.0, 90.0)
         self.fov.double_value = 60.0
         look.add_child(self.fov)
+        self.compare = gui.Checkbox("Before / after (original | stylized)")
+        look.add_child(self.compare)
+        self.split = gui.Slider(gui.Slider.DOUBLE)
+        self.split.set_limits(0.0, 1.0)
+        self.split.double_value = state.split
+        look.add_child(self.split)
         self.reset = gui.Button("Reset view (R)")
         look.add_child(self.reset)
+        for slider in (self.strength, self.fov, self.mix, self.split):  # the theme draws no track of its own
+            slider.background_color = SLIDER_TRACK
         self.root.add_child(look)
 
         # Export.
@@ -287,6 +319,23 @@ class Panel:
             grid.add_child(gui.Label(what))
         self.help.add_child(grid)
         self.help.visible = False
+
+    def add_style_thumbnail(self, thumb_u8, tooltip: str, on_click) -> None:
+        """Add a clickable (THUMB_PX, THUMB_PX, 3) uint8 thumbnail to the style strip."""
+        import numpy as np
+        import open3d as o3d
+
+        img = gui.ImageWidget(o3d.geometry.Image(np.ascontiguousarray(thumb_u8)))
+        img.tooltip = tooltip
+
+        def on_mouse(e: gui.MouseEvent) -> int:
+            if e.type == gui.MouseEvent.Type.BUTTON_DOWN:
+                on_click()
+                return gui.Widget.EventCallbackResult.CONSUMED
+            return gui.Widget.EventCallbackResult.IGNORED
+
+        img.set_on_mouse(on_mouse)
+        self.style_strip.add_child(img)
 
     def set_enabled(self, photo_loaded: bool) -> None:
         """Enable the controls that need a photo."""

@@ -29,7 +29,8 @@ view state), ``status`` (exporting, dialog open, closing, render phase),
 ``resize`` (width, height), ``add_keyframe``, ``edit_keyframe`` (index, fov,
 seconds, move, delete, loop), ``save_keyframes`` / ``load_keyframes`` (path),
 ``preview_keys``, ``open_section`` (name), ``save_as`` (what, text: types a
-path into a Save dialog), ``quit``.
+path into a Save dialog), ``style_strip`` (index), ``mix`` (path, value),
+``compare`` (split, on), ``quit``.
 """
 
 from __future__ import annotations
@@ -348,6 +349,23 @@ class ScriptRunner:
         still_open = self.main(type_and_save)
         self.op_wait_worker()
         return {"dialog_open": still_open, "status": self.main(lambda: w.panel.status.text)}
+
+    def op_style_strip(self, index: int = 0) -> Dict[str, Any]:
+        """Click thumbnail ``index`` of the style strip (applies that style)."""
+        w = self.window
+        path = self.main(lambda: w.photos._strip[int(index)])
+        self.main(lambda: w.photos.open_style(path))
+        self.op_wait_worker()
+        return {"style": path, "strip": self.main(lambda: list(w.photos._strip))}
+
+    def op_mix(self, path: str, value: float) -> None:
+        """Choose a second style and mix it in by ``value``."""
+        self.main(lambda: self.window.photos.open_second_style(path))
+        self.main(lambda: self.window.photos.set_mix(float(value)))
+
+    def op_compare(self, split: float = 0.5, on: bool = True) -> None:
+        """The before / after split at ``split`` of the width (or off)."""
+        self.main(lambda: self.window.set_compare(bool(on), float(split)))
 
     def op_add_keyframe(self) -> Dict[str, Any]:
         """Add the current view as a keyframe (the K key / Add keyframe button)."""

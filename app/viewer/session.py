@@ -94,6 +94,21 @@ def display_image(rgb: np.ndarray, display_hw: Tuple[int, int]) -> np.ndarray:
     return np.ascontiguousarray(u8)
 
 
+def split_view(before: np.ndarray, after: np.ndarray, fraction: float) -> np.ndarray:
+    """Before / after comparison of two (H, W, 3) images: ``before`` left of ``fraction`` of the width,
+    ``after`` right of it, and a 1-pixel light line at the split (none at 0 or 1)."""
+    if before.shape != after.shape:
+        raise InputError("split view", f"image shapes differ: {before.shape} and {after.shape}")
+    f = float(min(1.0, max(0.0, fraction)))
+    w = before.shape[1]
+    col = int(round(f * w))
+    out = np.array(after, copy=True)
+    out[:, :col] = before[:, :col]
+    if 0 < col < w:
+        out[:, col] = 0.9
+    return out
+
+
 class ViewerSession:
     """The loaded 3D photo, renderers, model and style (see the module docstring).
 
@@ -114,6 +129,9 @@ class ViewerSession:
         self.style_path: Optional[str] = None
         self._style_rgb: Optional[np.ndarray] = None
         self.strength = 0.8
+        self.style2_path: Optional[str] = None
+        self._style2_rgb: Optional[np.ndarray] = None
+        self.mix = 0.0
 
     # -- model --------------------------------------------------------------------
     def checkpoint_path(self) -> Optional[Path]:
@@ -169,6 +187,9 @@ class ViewerSession:
         s = Stylized3DPhoto(self.photo, ck, StylizeSettings(strength=self.strength), style_encoder=self._style_encoder)
         if self._style_rgb is not None:
             s.set_style(self._style_rgb)
+        if self._style2_rgb is not None:
+            s.set_second_style(self._style2_rgb)
+        s.set_mix(self.mix)
         self._stylized = s
         stage = "" if ck.stage == 2 else f" (stage {ck.stage}: no style training)"
         return StylizeInfo(True, f"model {self.checkpoint_path().name}{stage}", time.perf_counter() - t0)
@@ -181,6 +202,26 @@ class ViewerSession:
             self._stylized.set_style(rgb)
         self._style_rgb, self.style_path = rgb, str(path)
         return rgb.shape[:2]
+
+    def load_second_style(self, path: Optional[str]) -> Optional[Tuple[int, int]]:
+        """Read a second style image to mix with the first (None removes it); returns its (h, w)."""
+        if path is None:
+            if self._stylized is not None:
+                self._stylized.set_second_style(None)
+            self._style2_rgb, self.style2_path = None, None
+            return None
+        rgb = load_image(str(path), max_size=STYLE_MAX_SIZE).rgb
+        if self._stylized is not None:
+            self._stylized.set_second_style(rgb)
+        self._style2_rgb, self.style2_path = rgb, str(path)
+        return rgb.shape[:2]
+
+    def set_mix(self, mix: float) -> float:
+        """Mix of the two styles in [0, 1] (cheap: re-blends the two styles' cached features)."""
+        if self._stylized is not None:
+            self._stylized.set_mix(mix)
+        self.mix = float(mix)
+        return self.mix
 
     def set_strength(self, strength: float) -> float:
         """Style strength in [0, 1] (cheap: re-blends the cached features)."""
@@ -206,9 +247,16 @@ class ViewerSession:
         return self._plain.render(camera, height, width, preview=preview)
 
     def render_view(self, camera: Cameras, size: Tuple[int, int], display_hw: Tuple[int, int], *,
-                    preview: bool, stylized: bool, should_stop: Optional[Callable[[], bool]] = None) -> ViewFrame:
-        """Render at ``size`` (H, W) and convert for display at ``display_hw`` (``should_stop``: see :meth:`render`)."""
+                    preview: bool, stylized: bool, should_stop: Optional[Callable[[], bool]] = None,
+                    split: Optional[float] = None) -> ViewFrame:
+        """Render at ``size`` (H, W) and convert for display at ``display_hw`` (``should_stop``: see :meth:`render`).
+
+        ``split`` in [0, 1] (stylized views only): a before / after comparison, the original 3D photo
+        left of that fraction of the width and the stylized view right of it (see :func:`split_view`)."""
         rgb = self.render(camera, size[0], size[1], preview=preview, stylized=stylized, should_stop=should_stop)
+        if split is not None and stylized and self.can_stylize:
+            before = self.render(camera, size[0], size[1], preview=preview, stylized=False)
+            rgb = split_view(before, rgb, split)
         return ViewFrame(display_image(rgb, display_hw), tuple(size), stylized and self.can_stylize, preview)
 
     def export(self, job: ExportJob, progress: Optional[Progress] = None,

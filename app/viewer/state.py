@@ -154,6 +154,10 @@ class ViewState:
         style: path of the style image, or None.
         model: checkpoint path, or None for the default ``assets/model/stylize3d_lite.safetensors``.
         strength: style strength in [0, 1]. Default 0.8.
+        style2: path of a second style image to mix with the first, or None.
+        mix: mix of the two styles in [0, 1] (0: the first only). Default 0.
+        compare: show a before / after split of the view (original left, stylized right).
+        split: where the before / after split is, as a fraction of the width. Default 0.5.
         stylized: show the stylized view (True, default) or the original 3D photo.
         view_fov: vertical FOV of the view in degrees; None = the photo's FOV.
         pose: the camera relative to the input view.
@@ -177,6 +181,10 @@ class ViewState:
     style: Optional[str] = None
     model: Optional[str] = None
     strength: float = 0.8
+    style2: Optional[str] = None
+    mix: float = 0.0
+    compare: bool = False
+    split: float = 0.5
     stylized: bool = True
     view_fov: Optional[float] = None
     pose: OrbitPose = HOME
@@ -194,6 +202,8 @@ class ViewState:
         if not isinstance(self.spec, PhotoSpec):
             raise InputError("spec", f"expected a PhotoSpec, got {type(self.spec).__name__}")
         check_range(self.strength, "strength", 0.0, 1.0)
+        check_range(self.mix, "style mix", 0.0, 1.0)
+        check_range(self.split, "split", 0.0, 1.0)
         if self.view_fov is not None:
             check_fov(self.view_fov, "view fov")
         check_choice(self.trajectory.name, "trajectory", get_args(TrajectoryName))
@@ -322,6 +332,12 @@ def resolve_typed_path(text: str, folder: Optional[str]) -> str:
         return os.path.normpath(t) + ("/" if t.endswith("/") else "")
     base = folder or os.getcwd()
     return os.path.normpath(os.path.join(base, t)) + ("/" if t.endswith("/") else "")
+
+
+def push_recent(recent: Tuple[str, ...], path: str, limit: int = 8) -> Tuple[str, ...]:
+    """``recent`` with ``path`` first (moved there if present), at most ``limit`` entries."""
+    p = str(path)
+    return ((p,) + tuple(r for r in recent if r != p))[: max(1, int(limit))]
 
 
 def export_destination(path: str, fmt: ExportFormat) -> str:

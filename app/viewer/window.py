@@ -157,6 +157,12 @@ class ViewerWindow:
         p.open_photo.set_on_clicked(ph.on_open_photo)
         p.sample.set_on_clicked(ph.on_sample)
         p.open_style.set_on_clicked(ph.on_open_style)
+        p.recent_photos.set_on_selection_changed(ph.on_recent_photo)
+        p.open_style2.set_on_clicked(ph.on_open_style2)
+        p.mix.set_on_value_changed(ph.on_mix)
+        p.compare.set_on_checked(self._on_compare)
+        p.split.set_on_value_changed(self._on_split)
+        ph.build_strip()
         p.depth.set_on_selection_changed(ph.on_depth_choice)
         p.depth_file.set_on_clicked(ph.on_open_depth)
         p.refine.set_on_selection_changed(ph.on_refine_choice)
@@ -423,13 +429,15 @@ class ViewerWindow:
         display = self._display_hw
         size = frame_size(info.size, min(self._preview_side, max(display))) if preview else display
         stylized = shows_stylized(self.state)
+        split = self.state.split if self.state.compare else None
         version = self.scheduler.version
         session = self.session
         cancel = None if preview or camera is not None else threading.Event()
         stop = None if cancel is None else cancel.is_set
 
         def render() -> ViewFrame:
-            return session.render_view(cam, size, display, preview=preview, stylized=stylized, should_stop=stop)
+            return session.render_view(cam, size, display, preview=preview, stylized=stylized, should_stop=stop,
+                                       split=split)
 
         def interrupted() -> None:
             self._post(lambda: self.scheduler.full_interrupted(version))
@@ -659,6 +667,22 @@ class ViewerWindow:
             self.app.menubar.set_checked(P.MENU_STYLIZED, on)
         if on and not self.state.stylize_available and self.session.checkpoint_path() is None:
             self.set_status(NO_MODEL)
+        self.view_changed()
+
+    @ui_callback
+    def _on_compare(self, checked: bool) -> None:
+        self.set_compare(bool(checked), self.state.split)
+
+    @ui_callback
+    def _on_split(self, value: float) -> None:
+        self.set_compare(True, float(value))
+
+    def set_compare(self, on: bool, split: float) -> None:
+        """Before / after: the original 3D photo left of ``split`` (a fraction of the width), stylized right."""
+        self.state = replace(self.state, compare=on, split=float(min(1.0, max(0.0, split))))
+        self.panel.compare.checked = on
+        if abs(self.panel.split.double_value - self.state.split) > 1e-9:
+            self.panel.split.double_value = self.state.split
         self.view_changed()
 
     @ui_callback

@@ -484,3 +484,34 @@ def test_keyframe_editor_builds_a_path_exports_it_and_round_trips(display, tmp_p
     assert shot.width > 768, f"the screenshot is not at the view's size: {shot.size}"  # the view is ~944 px wide
     size = step(report, "resize")["result"]
     assert size["width"] >= 640 and size["height"] >= 480, f"no minimum window size: {size}"
+
+
+def test_style_strip_mix_and_before_after(display, tmp_path, untrained):
+    shots = {n: str(tmp_path / f"{n}.png") for n in ("first", "strip", "mixed", "split")}
+    steps = [
+        {"op": "load_sample"},
+        {"op": "wait_idle", "timeout": 240},
+        {"op": "screenshot", "path": shots["first"]},
+        {"op": "style_strip", "index": 0},
+        {"op": "wait_idle", "timeout": 120},
+        {"op": "screenshot", "path": shots["strip"]},
+        {"op": "mix", "path": str(OTHER_STYLE), "value": 0.5},
+        {"op": "wait_idle", "timeout": 120},
+        {"op": "screenshot", "path": shots["mixed"]},
+        {"op": "compare", "split": 0.5},
+        {"op": "wait_idle", "timeout": 120},
+        {"op": "grab_window", "path": str(tmp_path / "window.png")},
+        {"op": "state"},
+        {"op": "quit"},
+    ]
+    code, report = run_viewer(display, tmp_path, steps, ["--model", str(untrained)])
+    check_ran(code, report)
+    strip = step(report, "style_strip")["result"]
+    assert len(strip["strip"]) >= 4 and strip["style"] != ""  # the bundled styles
+    first, chosen, mixed = (pixels(Path(shots[n])) for n in ("first", "strip", "mixed"))
+    assert np.any(first != chosen), "clicking a thumbnail did not change the style"
+    assert np.any(mixed != chosen), "mixing in a second style did not change the view"
+    state = step(report, "state")["result"]
+    assert state["mix"] == 0.5 and state["compare"] is True and state["style2"].endswith(OTHER_STYLE.name)
+    window = pixels(tmp_path / "window.png")
+    assert window.std() > 20

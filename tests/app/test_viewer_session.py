@@ -170,3 +170,20 @@ def test_display_image_and_open3d_handoff():
     # The hand-off to the window: an o3d.geometry.Image holding the same pixels.
     img = o3d.geometry.Image(big)
     np.testing.assert_array_equal(np.asarray(img), big)
+
+
+def test_split_view_puts_before_left_and_after_right():
+    import numpy as np
+
+    from app.viewer.session import split_view
+
+    before, after = np.zeros((4, 10, 3), np.float32), np.ones((4, 10, 3), np.float32) * 0.5
+    out = split_view(before, after, 0.3)
+    assert (out[:, :3] == 0).all() and (out[:, 4:] == 0.5).all() and (out[:, 3] == 0.9).all()
+    assert (split_view(before, after, 0.0) == after).all() and (split_view(before, after, 1.0) == before).all()
+    import pytest
+
+    from stylize3d_core.errors import InputError
+
+    with pytest.raises(InputError, match="shapes"):
+        split_view(before, after[:, :5], 0.5)

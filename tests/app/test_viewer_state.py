@@ -185,3 +185,14 @@ def test_typed_paths_absolute_home_and_relative(tmp_path):
     assert resolve_typed_path("frames/", str(tmp_path)).endswith("/frames/")
     with pytest.raises(InputError, match="file name"):
         resolve_typed_path("   ", None)
+
+
+def test_recent_files_most_recent_first_without_duplicates():
+    from app.viewer.state import push_recent
+
+    r = ()
+    for p in ("a.jpg", "b.jpg", "a.jpg", "c.jpg"):
+        r = push_recent(r, p, limit=2 if p == "c.jpg" else 8)
+    assert r == ("c.jpg", "a.jpg")
+    with pytest.raises(InputError):
+        ViewState(mix=1.5)
