@@ -198,12 +198,16 @@ def interactive(model: str, megapixels: float, full_side: int, tmp: str, max_siz
             last, full = previews[-1][2].image.astype(np.float32), fulls[0][2].image.astype(np.float32)
             # the same pose: re-render the last preview's pose as a preview for a like-for-like comparison
             cam = pose_camera(OrbitPose(yaw_deg=state["yaw"]), info.scene, info.fov_y_deg)
-            same = display_image(s.render(cam, *frame_size(info.size, state["side"]), preview=True, stylized=True),
-                                 display).astype(np.float32)
+            same = s.render_view(cam, frame_size(info.size, state["side"]), display, preview=True,
+                                 stylized=True).image.astype(np.float32)  # as the viewer shows it (colour-matched)
+            raw = display_image(s.render(cam, *frame_size(info.size, state["side"]), preview=True, stylized=True),
+                                display).astype(np.float32)
+            raw_jump = np.abs(raw.mean((0, 1)) - full.mean((0, 1))).mean()
             jump = np.abs(same.mean((0, 1)) - full.mean((0, 1)))
             print(f"    colour jump last preview -> full frame (same pose, {state['side']} px): mean colour "
                   f"{jump.mean():.2f} levels (R {jump[0]:.2f} G {jump[1]:.2f} B {jump[2]:.2f}), "
-                  f"mean pixel difference {np.abs(same - full).mean():.1f} levels; "
+                  f"mean pixel difference {np.abs(same - full).mean():.1f} levels; without colour matching "
+                  f"{raw_jump:.2f} levels; "
                   f"(last preview shown vs full, poses 1 step apart: {np.abs(last - full).mean():.1f})")
 
     try:

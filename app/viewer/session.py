@@ -129,6 +129,8 @@ class ViewerSession:
         self.style_path: Optional[str] = None
         self._style_rgb: Optional[np.ndarray] = None
         self.strength = 0.8
+        self.colour_gain: Optional[np.ndarray] = None  # (3,) per-channel gain of stylized previews
+        self._preview_hw: Optional[Tuple[int, int]] = None  # size of the last stylized preview
         self.style2_path: Optional[str] = None
         self._style2_rgb: Optional[np.ndarray] = None
         self.mix = 0.0
@@ -167,6 +169,7 @@ class ViewerSession:
         plain = PlainRenderer(photo.points, self.plain_settings)
         # Nothing failed: replace the old photo (and drop its encoding).
         self.photo, self._plain, self._stylized = photo, plain, None
+        self.colour_gain = None
         self.info = PhotoInfo(str(spec.photo), tuple(photo.size), plain.num_points, float(photo.fov_y_deg),
                               photo.depth.source, scene, time.perf_counter() - t0)
         return self.info
@@ -254,10 +257,32 @@ class ViewerSession:
         ``split`` in [0, 1] (stylized views only): a before / after comparison, the original 3D photo
         left of that fraction of the width and the stylized view right of it (see :func:`split_view`)."""
         rgb = self.render(camera, size[0], size[1], preview=preview, stylized=stylized, should_stop=should_stop)
+        if stylized and self.can_stylize:
+            if preview:
+                self._preview_hw = (int(size[0]), int(size[1]))
+                if self.colour_gain is not None:
+                    rgb = np.clip(rgb * self.colour_gain, 0.0, 1.0)
+            else:
+                self.calibrate_previews(camera, rgb)
         if split is not None and stylized and self.can_stylize:
             before = self.render(camera, size[0], size[1], preview=preview, stylized=False)
             rgb = split_view(before, rgb, split)
         return ViewFrame(display_image(rgb, display_hw), tuple(size), stylized and self.can_stylize, preview)
+
+    def calibrate_previews(self, camera: Cameras, full: np.ndarray) -> Optional[np.ndarray]:
+        """Match the colours of stylized previews to the full frame ``full`` of ``camera``: the decoder
+        paints a small preview of fewer points a little differently (greener, at 96 px), so each release
+        would visibly jump. Renders one preview of the same camera at the last preview size and keeps the
+        per-channel gain (mean of the full frame / mean of the preview, within [0.8, 1.25]) that later
+        previews are multiplied by. Returns the gain (None before any preview)."""
+        if self._preview_hw is None or self._stylized is None:
+            return None
+        h, w = self._preview_hw
+        small = self._stylized.render(camera, h, w, preview=True)
+        m_full = full.reshape(-1, 3).mean(0)
+        m_prev = small.reshape(-1, 3).mean(0)
+        self.colour_gain = np.clip(m_full / np.maximum(m_prev, 1e-3), 0.8, 1.25).astype(np.float32)
+        return self.colour_gain
 
     def export(self, job: ExportJob, progress: Optional[Progress] = None,
                between_frames: Optional[Callable[[], object]] = None) -> Path:

@@ -187,3 +187,20 @@ def test_split_view_puts_before_left_and_after_right():
 
     with pytest.raises(InputError, match="shapes"):
         split_view(before, after[:, :5], 0.5)
+
+
+def test_previews_are_colour_matched_to_the_full_frame(untrained):
+    s = ViewerSession(model=str(untrained))
+    s.load_photo(PhotoSpec(str(SAMPLE_PHOTO), "prior", max_size=MAX_SIZE))
+    s.prepare_stylized()
+    s.load_style(str(SAMPLE_STYLE))
+    cam = pose_camera(OrbitPose(yaw_deg=2.0), s.info.scene, s.info.fov_y_deg)
+    full_hw, prev_hw = frame_size(s.info.size, 160), frame_size(s.info.size, 48)
+    before = s.render_view(cam, prev_hw, full_hw, preview=True, stylized=True).image.astype(np.float32)
+    assert s.colour_gain is None
+    full = s.render_view(cam, full_hw, full_hw, preview=False, stylized=True).image.astype(np.float32)
+    assert s.colour_gain is not None and s.colour_gain.shape == (3,)
+    after = s.render_view(cam, prev_hw, full_hw, preview=True, stylized=True).image.astype(np.float32)
+    jump_before = np.abs(before.mean((0, 1)) - full.mean((0, 1))).mean()
+    jump_after = np.abs(after.mean((0, 1)) - full.mean((0, 1))).mean()
+    assert jump_after <= jump_before + 1e-6 and jump_after < 1.0, (jump_before, jump_after)
