@@ -236,8 +236,7 @@ class Panel:
         export.add_child(grid)
         self.export = gui.Button("Export... (E)")
         self.screenshot = gui.Button("Screenshot (P)")
-        export.add_child(_row(em, self.export, self.screenshot))
-        self.root.add_child(export)
+        self.root.add_child(export)  # (its buttons are in the status area, always in sight)
 
         # Camera path: trajectory and its parameters, preview, load / save.
         path = gui.CollapsableVert("Camera path", 0.3 * em, gui.Margins(int(0.5 * em), 0, 0, 0))
@@ -307,7 +306,7 @@ class Panel:
         self.status_box.add_child(self.model_label)
         self.status_box.add_child(self.fps_label)
         self.status_box.add_child(self.progress)
-        self.status_box.add_child(self.cancel)
+        self.status_box.add_child(_row(em, self.export, self.screenshot, self.cancel))
 
         # Help overlay, drawn over the view.
         self.help = gui.Vert(0.2 * em, gui.Margins(int(em), int(em), int(em), int(em)))
