@@ -170,6 +170,7 @@ class PhotoController(Controller):
         lo, hi = fov_range(info.fov_y_deg)
         p.fov.set_limits(lo, hi)
         p.fov.double_value = info.fov_y_deg
+        p.fov_label.text = f"Field of view: {info.fov_y_deg:.1f} degrees"
         p.set_enabled(True)
         w.set_busy(f"3D photo ready in {info.seconds:.1f} s (depth: {info.depth_source})", 0.5)
         w.photo_changed()  # requests the first (plain) frame

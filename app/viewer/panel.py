@@ -194,12 +194,14 @@ class Panel:
         self.stylized = gui.ToggleSwitch("Stylized (T)")
         self.stylized.is_on = state.stylized
         look.add_child(self.stylized)
-        look.add_child(gui.Label("Style strength"))
+        self.strength_label = gui.Label(f"Style strength: {state.strength:.2f}")
+        look.add_child(self.strength_label)
         self.strength = gui.Slider(gui.Slider.DOUBLE)
         self.strength.set_limits(0.0, 1.0)
         self.strength.double_value = state.strength
         look.add_child(self.strength)
-        look.add_child(gui.Label("Field of view (degrees)"))
+        self.fov_label = gui.Label("Field of view: 60.0 degrees")  # (the slider's handle hides its own value)
+        look.add_child(self.fov_label)
         self.fov = gui.Slider(gui.Slider.DOUBLE)
         self.fov.set_limits(30.0, 90.0)
         self.fov.double_value = 60.0

@@ -323,6 +323,7 @@ class ViewerWindow:
         """Show a modal dialog (letter shortcuts are off while one is open)."""
         self._dialog_open = True
         self.window.show_dialog(dlg)
+        self.window.post_redraw()  # Open3D draws a new dialog's first frame garbled until the next redraw
 
     def close_dialog(self) -> None:
         """Close the open dialog; an error's status line goes back to what it said before."""
@@ -571,6 +572,7 @@ class ViewerWindow:
         self.state = replace(self.state, pose=HOME, view_fov=None)
         if self.state.photo_info is not None:
             self.panel.fov.double_value = self.state.photo_info.fov_y_deg
+            self.panel.fov_label.text = f"Field of view: {self.state.photo_info.fov_y_deg:.1f} degrees"
         self.view_changed()
 
     @ui_callback
@@ -580,6 +582,7 @@ class ViewerWindow:
     @ui_callback
     def _on_fov(self, value: float) -> None:
         self.state = replace(self.state, view_fov=float(value))
+        self.panel.fov_label.text = f"Field of view: {float(value):.1f} degrees"
         self.view_changed()
 
     @ui_callback
@@ -693,6 +696,7 @@ class ViewerWindow:
         """Style strength in [0, 1] (a re-blend on the worker, then a new frame)."""
         a = float(min(1.0, max(0.0, value)))
         self.state = replace(self.state, strength=a)
+        self.panel.strength_label.text = f"Style strength: {a:.2f}"
         if abs(self.panel.strength.double_value - a) > 1e-9:
             self.panel.strength.double_value = a
         self.worker.submit("strength", lambda: self.session.set_strength(a), key="strength")
