@@ -236,12 +236,7 @@ class PhotoController(Controller):
     def set_mix(self, value: float) -> None:
         """Mix of the two styles in [0, 1] (a re-blend on the worker, then a new frame)."""
         w = self.window
-        m = float(min(1.0, max(0.0, value)))
-        w.state = replace(w.state, mix=m)
-        if abs(w.panel.mix.double_value - m) > 1e-9:
-            w.panel.mix.double_value = m
-        w.worker.submit("mix", lambda: w.session.set_mix(m), key="mix")
-        w.view_changed()
+        w.set_blend("mix", w.panel.mix, value, w.session.set_mix)
 
     @ui_callback
     def on_open_style2(self) -> None:

@@ -694,13 +694,20 @@ class ViewerWindow:
 
     def set_strength(self, value: float) -> None:
         """Style strength in [0, 1] (a re-blend on the worker, then a new frame)."""
-        a = float(min(1.0, max(0.0, value)))
-        self.state = replace(self.state, strength=a)
+        a = self.set_blend("strength", self.panel.strength, value, self.session.set_strength)
         self.panel.strength_label.text = f"Style strength: {a:.2f}"
-        if abs(self.panel.strength.double_value - a) > 1e-9:
-            self.panel.strength.double_value = a
-        self.worker.submit("strength", lambda: self.session.set_strength(a), key="strength")
+
+    def set_blend(self, field: str, slider: gui.Slider, value: float, apply: Callable[[float], Any]) -> float:
+        """Set ``state.<field>`` (strength, mix) to ``value`` clamped to [0, 1], show it on ``slider``,
+        run ``apply(value)`` on the worker (a cheap re-blend; a newer one replaces a waiting one) and ask
+        for a new frame. Returns the value."""
+        a = float(min(1.0, max(0.0, value)))
+        self.state = replace(self.state, **{field: a})
+        if abs(slider.double_value - a) > 1e-9:
+            slider.double_value = a
+        self.worker.submit(field, lambda: apply(a), key=field)
         self.view_changed()
+        return a
 
     # -- help, about, quit ---------------------------------------------------------------
     @ui_callback

@@ -92,6 +92,17 @@ def read_report(path: Path) -> Dict[str, Any]:
     return json.loads(path.read_text()) if path.exists() else {}
 
 
+def wait_for_step(report_path: Path, op: str, count: int = 1, timeout: float = 120.0) -> Dict[str, Any]:
+    """The report once the viewer has run ``count`` steps ``op`` (polled while the test interacts)."""
+    t_end = time.monotonic() + timeout
+    while time.monotonic() < t_end:
+        rep = read_report(report_path)
+        if sum(s["op"] == op for s in rep.get("steps", [])) >= count:
+            return rep
+        time.sleep(0.05)
+    raise AssertionError(f"the viewer never reached the {op!r} step")
+
+
 def check_ran(code: Optional[int], report: Dict[str, Any]) -> None:
     failed = [s for s in report.get("steps", []) if not s.get("ok")]
     assert code == 0, f"viewer exit code {code} (negative = crashed); failed steps: {failed}"
@@ -273,13 +284,7 @@ def test_real_mouse_drag_and_key_press(display, tmp_path):
     ]
 
     def wait_for(report_path: Path, op: str, count: int = 1) -> Dict[str, Any]:
-        t_end = time.monotonic() + 120
-        while time.monotonic() < t_end:
-            rep = read_report(report_path)
-            if sum(s["op"] == op for s in rep.get("steps", [])) >= count:
-                return rep
-            time.sleep(0.1)
-        raise AssertionError(f"the viewer never reached the {op!r} step")
+        return wait_for_step(report_path, op, count)
 
     def interact(report_path: Path) -> None:
         rep = wait_for(report_path, "grab_window")
@@ -378,13 +383,7 @@ def test_real_events_second_drag_shows_frames_esc_and_close_during_export(displa
     marks: Dict[str, Any] = {}
 
     def wait_for(report_path: Path, op: str, count: int = 1) -> Dict[str, Any]:
-        t_end = time.monotonic() + 240
-        while time.monotonic() < t_end:
-            rep = read_report(report_path)
-            if sum(s["op"] == op for s in rep.get("steps", [])) >= count:
-                return rep
-            time.sleep(0.05)
-        raise AssertionError(f"the viewer never reached the {op!r} step")
+        return wait_for_step(report_path, op, count, timeout=240)
 
     def drag(dpy, x, y, seconds, dx_per_step):
         lt.XTestFakeMotionEvent(dpy, -1, x, y, 0)
