@@ -516,3 +516,42 @@ def test_style_strip_mix_and_before_after(display, tmp_path, untrained):
     assert state["mix"] == 0.5 and state["compare"] is True and state["style2"].endswith(OTHER_STYLE.name)
     window = pixels(tmp_path / "window.png")
     assert window.std() > 20
+
+
+def test_real_wheel_up_moves_forwards(display, tmp_path):
+    libs = _xtest()
+    if libs is None:
+        pytest.skip("libXtst is not installed: cannot send real wheel events to Xvfb")
+    lx, lt = libs
+    steps = [
+        {"op": "load_sample"},
+        {"op": "wait_idle", "timeout": 120},
+        {"op": "grab_window", "path": str(tmp_path / "window.png")},
+        {"op": "sleep", "seconds": 3.0},  # the test turns the wheel up now
+        {"op": "state"},
+        {"op": "quit"},
+    ]
+
+    def interact(report_path: Path) -> None:
+        rep = wait_for_step(report_path, "grab_window")
+        x0, y0, x1, y1 = step(rep, "grab_window")["result"]["box"]
+        x, y = x0 + (x1 - x0) // 3, (y0 + y1) // 2
+        dpy = lx.XOpenDisplay(display.encode())
+        try:
+            lt.XTestFakeMotionEvent(dpy, -1, x, y, 0)
+            lx.XFlush(dpy)
+            time.sleep(0.3)
+            for i in range(3):  # X button 4 is wheel up
+                lt.XTestFakeButtonEvent(dpy, 4, 1, 0)
+                lt.XTestFakeButtonEvent(dpy, 4, 0, 0)
+                lx.XFlush(dpy)
+                time.sleep(0.2)
+                lt.XTestFakeMotionEvent(dpy, -1, x + i + 1, y, 0)  # Open3D hands the wheel over with the next event
+                lx.XFlush(dpy)
+                time.sleep(0.1)
+        finally:
+            lx.XCloseDisplay(dpy)
+
+    code, report = run_viewer(display, tmp_path, steps, ["--no-model"], during=interact)
+    check_ran(code, report)
+    assert step(report, "state")["result"]["pose"]["dolly"] > 0, "wheel up did not move forwards"
