@@ -12,12 +12,26 @@ photo size, along an orbit drag of ``--frames`` camera positions:
 * **full frame** at the viewer's full size (``--full-size``, 768 for the
   default 1280x800 window): latency from request to display-ready image.
 
+* **interactive** (``--interactive``): the live view's own machinery without a
+  window -- :class:`~app.viewer.worker.ComputeWorker`, the render state machine
+  (:mod:`app.viewer.render_state`) and the preview-size adaptation -- driven by
+  a simulated drag of mouse moves at 60 Hz on a photo of ``--megapixels`` (the
+  sample upscaled; default 1 MP), once as the viewer opens it (``--max-size``,
+  default 640) and once at its full size, through the stylized path. It reports the
+  frames per second delivered while dragging (what the window would show, less
+  its own redraw), the latency from mouse-down to the first new frame (also for
+  a second drag started 0.3 s after the first, while the first rest's full frame
+  renders), the time from rest to the full frame, and the colour jump between
+  the last preview and the full frame (mean absolute per-channel difference of
+  the means, in 8-bit levels, and mean absolute pixel difference).
+
 Both paths are measured: the plain 3D photo, and the stylized one through a
 model checkpoint (``--model``; default: the trained one if present, else an
 untrained lite model written to a temporary file, which costs the same time).
 The machine is shared, so the load average is printed with the figures.
 
-Run: ``python benchmarks/bench_viewer.py [--threads 1] [--frames 40]``.
+Run: ``python benchmarks/bench_viewer.py [--threads 1] [--frames 40]`` or
+``python benchmarks/bench_viewer.py --interactive [--megapixels 1.0]``.
 """
 
 from __future__ import annotations
@@ -81,6 +95,129 @@ def adaptive(session: ViewerSession, cams, display, stylized: bool) -> None:
     report(f"adaptive preview (settles at {side} px)", tail)
 
 
+def _drag_session(model: str, megapixels: float, tmp: str, max_size: int = 0):
+    """A session on the sample upscaled to ``megapixels``, loaded as the viewer loads it with ``max_size``
+    (0: the whole photo)."""
+    import cv2
+    import numpy as np
+
+    from stylize3d_core.io.images import load_image, save_image
+
+    rgb = load_image(str(SAMPLE_PHOTO)).rgb
+    h, w = rgb.shape[:2]
+    scale = (megapixels * 1e6 / (h * w)) ** 0.5
+    big = cv2.resize(rgb, (int(round(w * scale)), int(round(h * scale))), interpolation=cv2.INTER_CUBIC)
+    path = str(Path(tmp) / "sample_big.png")
+    save_image(path, np.clip(big, 0, 1))
+    s = ViewerSession(model)
+    s.load_style(str(SAMPLE_STYLE))
+    info = s.load_photo(PhotoSpec(path, "auto", max_size=max_size or max(big.shape[:2])))
+    s.prepare_stylized()
+    return s, info
+
+
+def interactive(model: str, megapixels: float, full_side: int, tmp: str, max_size: int = 0) -> None:
+    """Simulated drags through the viewer's worker and render state machine (see the module docstring)."""
+    import queue
+    import threading
+
+    import numpy as np
+
+    from app.viewer.render_state import RenderStateMachine
+    from app.viewer.session import display_image
+    from app.viewer.worker import ComputeWorker
+
+    s, info = _drag_session(model, megapixels, tmp, max_size)
+    h, w = info.size
+    settings = PreviewSettings()
+    display = frame_size(info.size, full_side)
+    print(f"interactive: photo {w}x{h} ({w * h / 1e6:.2f} MP), {info.n_points:,} points, full frame "
+          f"{display[1]}x{display[0]}, preview budget {1000 * settings.target_preview_s:.0f} ms; "
+          f"load average {os.getloadavg()[0]:.1f}")
+    cam0 = pose_camera(OrbitPose(), info.scene, info.fov_y_deg)
+    s.render_view(cam0, frame_size(info.size, settings.preview_long_side), display, preview=True, stylized=True)
+    worker = ComputeWorker()
+    worker.start()
+    machine = RenderStateMachine(settings.rest_delay_s)
+    shown: "queue.Queue" = queue.Queue()
+    state = {"side": settings.preview_long_side, "yaw": 0.0}
+
+    def request(preview: bool) -> None:
+        pose = OrbitPose(yaw_deg=state["yaw"], pitch_deg=0.0)
+        cam = pose_camera(pose, info.scene, info.fov_y_deg)
+        size = frame_size(info.size, min(state["side"], max(display))) if preview else display
+        cancel = None if preview else threading.Event()
+        version = machine.version
+
+        def fn():
+            return s.render_view(cam, size, display, preview=preview, stylized=True,
+                                 should_stop=None if cancel is None else cancel.is_set)
+
+        worker.request_render(fn, lambda r: shown.put((time.perf_counter(), version, r)), preview=preview,
+                              cancel=cancel)
+        if not preview:
+            machine.full_requested()
+
+    def pump(until: float, moving: bool, log: list) -> None:
+        """The main loop: a mouse move every 1/60 s while ``moving``, deliveries, the tick."""
+        step_at = time.perf_counter()
+        while time.perf_counter() < until:
+            now = time.perf_counter()
+            if moving and now >= step_at:
+                state["yaw"] += 0.15
+                if machine.changed(now).interrupt:
+                    worker.interrupt_render()
+                request(True)
+                step_at += 1 / 60
+            if machine.full_due(now, holding=moving):
+                request(False)
+            try:
+                t, version, r = shown.get(timeout=0.002)
+            except queue.Empty:
+                continue
+            machine.shown(version, r.preview)
+            if r.preview:
+                state["side"] = adapt_preview_long_side(state["side"], r.seconds, settings)
+            log.append((t, r.preview, r.value, version))
+
+    def drag(seconds: float, label: str, rest: float) -> None:
+        log: list = []
+        t0 = time.perf_counter()
+        pump(t0 + seconds, True, log)
+        t_rest = time.perf_counter()
+        pump(t_rest + rest, False, log)
+        moving = [e for e in log if e[0] <= t_rest and e[1]]
+        first = min((e[0] for e in log), default=float("nan"))
+        fulls = [e for e in log if not e[1] and e[0] > t_rest]
+        fps = len(moving) / seconds
+        print(f"  {label}: {fps:5.1f} fps delivered while dragging ({len(moving)} previews, last at "
+              f"{state['side']} px); mouse-down to first frame {1000 * (first - t0):6.0f} ms; "
+              f"rest to full frame {fulls[0][0] - t_rest if fulls else float('nan'):5.2f} s")
+        previews = [e for e in log if e[1] and e[0] <= t_rest]
+        if previews and fulls:
+            last, full = previews[-1][2].image.astype(np.float32), fulls[0][2].image.astype(np.float32)
+            # the same pose: re-render the last preview's pose as a preview for a like-for-like comparison
+            cam = pose_camera(OrbitPose(yaw_deg=state["yaw"]), info.scene, info.fov_y_deg)
+            same = s.render_view(cam, frame_size(info.size, state["side"]), display, preview=True,
+                                 stylized=True).image.astype(np.float32)  # as the viewer shows it (colour-matched)
+            raw = display_image(s.render(cam, *frame_size(info.size, state["side"]), preview=True, stylized=True),
+                                display).astype(np.float32)
+            raw_jump = np.abs(raw.mean((0, 1)) - full.mean((0, 1))).mean()
+            jump = np.abs(same.mean((0, 1)) - full.mean((0, 1)))
+            print(f"    colour jump last preview -> full frame (same pose, {state['side']} px): mean colour "
+                  f"{jump.mean():.2f} levels (R {jump[0]:.2f} G {jump[1]:.2f} B {jump[2]:.2f}), "
+                  f"mean pixel difference {np.abs(same - full).mean():.1f} levels; without colour matching "
+                  f"{raw_jump:.2f} levels; "
+                  f"(last preview shown vs full, poses 1 step apart: {np.abs(last - full).mean():.1f})")
+
+    try:
+        drag(1.5, "first drag 1.5 s", 0.3)  # a second drag 0.3 s after the first: its full frame is rendering
+        drag(1.5, "second drag (0.3 s after)", 10.0)
+        print(f"  full renders interrupted: {worker.interrupted}")
+    finally:
+        worker.stop(timeout=10)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--threads", type=int, default=1, help="torch threads (the viewer's default is 1)")
@@ -89,8 +226,19 @@ def main() -> None:
     parser.add_argument("--preview-sizes", default="128,192,256,320")
     parser.add_argument("--full-size", type=int, default=768, help="full-frame long side (viewer default cap 768)")
     parser.add_argument("--model", default=None, help="checkpoint for the stylized path")
+    parser.add_argument("--interactive", action="store_true", help="simulated drags through the live view's "
+                        "worker and state machine (fps, latencies, colour jump)")
+    parser.add_argument("--megapixels", type=float, default=1.0, help="photo size of --interactive (default 1 MP)")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
+    if args.interactive:
+        model = args.model or str(DEFAULT_MODEL)
+        with tempfile.TemporaryDirectory() as tmp:
+            print(f"model {Path(model).name}; torch threads {args.threads}; {os.cpu_count()} CPUs")
+            for max_size in (args.max_size, 0):  # as the viewer opens it (default --max-size), and whole
+                interactive(model, args.megapixels, args.full_size, tmp, max_size)
+        print(f"load average after: {os.getloadavg()[0]:.1f}")
+        return
 
     with tempfile.TemporaryDirectory() as tmp:
         model = args.model or (str(DEFAULT_MODEL) if DEFAULT_MODEL.is_file() else None)

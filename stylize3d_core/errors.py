@@ -36,3 +36,11 @@ class ExportError(Stylize3DError, OSError):
 
     Whatever was at the destination before is left untouched.
     """
+
+
+class RenderInterrupted(Exception):
+    """A render was abandoned on request (its ``should_stop`` check returned True between two stages).
+
+    Not an error: the caller asked for it (the viewer's camera moved on), so it
+    is not a :class:`Stylize3DError`.
+    """

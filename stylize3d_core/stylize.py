@@ -9,6 +9,7 @@ what changes           what is recomputed                           typical cost
 photo                  geometry (NDC, FPS, ball queries, 3-NN),     seconds
                        content features
 style                  style CNN features, AdaAttN                  < 1 s
+second style / mix     (its features once) then a blend             ~0.1 s (at the next render)
 strength               blend + IDW upsampling to every point        ~0.1 s (at the next render)
 camera                 rasterize + U-Net decode                     see benchmarks
 =====================  ==========================================  ==================
@@ -24,13 +25,13 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Dict, Iterator, Optional
+from typing import Callable, Dict, Iterator, List, Optional
 
 import numpy as np
 import torch
 
 from .checks import check_range, check_shape
-from .errors import InputError
+from .errors import InputError, RenderInterrupted
 from .geometry.camera import Cameras
 from .models.adaattn import blend
 from .models.checkpoint import Checkpoint, load_checkpoint
@@ -72,6 +73,18 @@ def style_tensor(style_rgb: np.ndarray, name: str = "style image") -> torch.Tens
     return torch.from_numpy(np.ascontiguousarray(style_rgb, dtype=np.float32)).permute(2, 0, 1)[None].clamp(0, 1)
 
 
+def _stop_hooks(decoder: torch.nn.Module, should_stop: Callable[[], bool]) -> List:
+    """Forward pre-hooks on the decoder's levels and output layers that raise
+    :class:`RenderInterrupted` once ``should_stop()`` is True (the caller removes them)."""
+    def check(_module, _inputs):
+        if should_stop():
+            raise RenderInterrupted("render stopped inside the decoder")
+
+    stages = [m for name in ("skips", "downs", "ups") for m in getattr(decoder, name, [])]
+    stages += [getattr(decoder, name) for name in ("out_conv", "out_rgb") if hasattr(decoder, name)]
+    return [m.register_forward_pre_hook(check) for m in stages]
+
+
 class Stylized3DPhoto:
     """A 3D photo rendered through the stylization model (see the module docstring).
 
@@ -108,6 +121,8 @@ class Stylized3DPhoto:
         self._order = random_order(self._geom.xyz.shape[0], settings.seed)  # (N,)
         self._xyz = self._geom.xyz.index_select(0, self._order).contiguous()  # (N, 3), random order
         self._stylized: Optional[torch.Tensor] = None  # (M, C) at strength 1
+        self._stylized2: Optional[torch.Tensor] = None  # (M, C) of the second style, at strength 1
+        self._mix = 0.0
         self._dense: Optional[torch.Tensor] = None  # (N, Cr) in self._order
         self._strength = settings.strength
         self.timings.update({"geometry": t1 - t0, "encode": t2 - t1})
@@ -146,6 +161,26 @@ class Stylized3DPhoto:
             self.timings["style"] = time.perf_counter() - t0
         self._dense = None
 
+    def set_second_style(self, style_rgb: Optional[np.ndarray]) -> None:
+        """A second style image to mix with the first (None removes it); see :meth:`set_mix`."""
+        if style_rgb is None:
+            self._stylized2 = None
+        else:
+            with torch.inference_mode():
+                maps = self._encoder()(style_tensor(style_rgb, "second style image")).maps
+                self._stylized2 = self.model.stylizer.stylize(self._content, maps)  # (M, C)
+        self._dense = None
+
+    def set_mix(self, mix: float) -> None:
+        """Mix of the two styles in [0, 1]: 0 the first, 1 the second. Cheap: the stylizer's outputs for
+        both are kept and blended (no re-encoding, no new style features)."""
+        self._mix = check_range(mix, "style mix", 0.0, 1.0)
+        self._dense = None
+
+    @property
+    def mix(self) -> float:
+        return self._mix
+
     def set_strength(self, strength: float) -> None:
         """Change the style strength in [0, 1] (cheap: no re-encoding, no new style features)."""
         self._strength = check_range(strength, "strength", 0.0, 1.0)
@@ -154,10 +189,13 @@ class Stylized3DPhoto:
     def _update_dense(self) -> None:
         t0 = time.perf_counter()
         with torch.inference_mode():
-            if self._stylized is None or self._strength == 0.0:
+            stylized = self._stylized
+            if stylized is not None and self._stylized2 is not None and self._mix > 0.0:
+                stylized = torch.lerp(stylized, self._stylized2, self._mix)
+            if stylized is None or self._strength == 0.0:
                 sparse = self._content
             else:
-                sparse = blend(self._content, self._stylized, self._strength)
+                sparse = blend(self._content, stylized, self._strength)
             dense = self.model.dense_features(sparse, self._geom)  # (N, Cr)
             if not torch.isfinite(dense.sum()) and not torch.isfinite(dense).all():
                 raise InputError(self._checkpoint_name, "its weights make NaN or infinite features on this photo "
@@ -165,8 +203,16 @@ class Stylized3DPhoto:
             self._dense = dense.index_select(0, self._order).contiguous()
         self.timings["upsample"] = time.perf_counter() - t0
 
-    def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False) -> np.ndarray:
-        """One view (H, W, 3) float32 in [0, 1]; ``preview`` renders a point subset without supersampling."""
+    def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False,
+               should_stop: Optional[Callable[[], bool]] = None) -> np.ndarray:
+        """One view (H, W, 3) float32 in [0, 1]; ``preview`` renders a point subset without supersampling.
+
+        ``should_stop`` (any thread may make it return True) is checked between
+        the stages: before rasterizing, before each level of the decoder and
+        before its output layers; when it returns True the render stops with
+        :class:`~stylize3d_core.errors.RenderInterrupted` (nothing is cached
+        from a stopped render).
+        """
         if self._dense is None:  # upsampled lazily: a style set right after construction is not done twice
             self._update_dense()
         n = self.num_points
@@ -175,9 +221,17 @@ class Stylized3DPhoto:
             ss = 1
         else:
             keep, ss = n, self.settings.supersample
-        with torch.inference_mode():
-            rgb, _ = self.model.render_view(self._dense[:keep], self._xyz[:keep], camera, height, width, supersample=ss)
-            rgb = torch.nan_to_num(rgb, nan=0.0).clamp_(0.0, 1.0)
+        hooks = _stop_hooks(self.model.decoder, should_stop) if should_stop is not None else []
+        try:
+            with torch.inference_mode():
+                if should_stop is not None and should_stop():
+                    raise RenderInterrupted("render stopped before rasterizing")
+                rgb, _ = self.model.render_view(self._dense[:keep], self._xyz[:keep], camera, height, width,
+                                                supersample=ss)
+                rgb = torch.nan_to_num(rgb, nan=0.0).clamp_(0.0, 1.0)
+        finally:
+            for h in hooks:
+                h.remove()
         return rgb.permute(1, 2, 0).contiguous().numpy()
 
     def frames(self, cameras: Cameras, height: int, width: int) -> Iterator[np.ndarray]:

@@ -58,3 +58,54 @@ def test_frames_and_bad_input(stylized):
         stylized.set_style(np.full((8, 8, 3), np.nan, np.float32))
     with pytest.raises(InputError):
         StylizeSettings(supersample=3)
+
+
+def test_render_stops_between_stages_when_asked(stylized):
+    """``should_stop`` is checked before rasterizing and before each decoder level."""
+    from stylize3d_core.errors import RenderInterrupted
+
+    s = stylized
+    cam = Cameras.identity(s.photo.fov_y_deg)
+    calls = []
+
+    def stop_after(n):
+        def check():
+            calls.append(1)
+            return len(calls) > n
+        return check
+
+    with pytest.raises(RenderInterrupted):
+        s.render(cam, 32, 48, should_stop=stop_after(0))
+    assert len(calls) == 1
+    for n in (1, 3):  # stopped inside the decoder
+        calls.clear()
+        with pytest.raises(RenderInterrupted):
+            s.render(cam, 32, 48, should_stop=stop_after(n))
+        assert len(calls) == n + 1
+    calls.clear()
+    full = s.render(cam, 32, 48, should_stop=lambda: calls.append(1) and False)
+    assert len(calls) > 3  # checked at every stage
+    assert (full == s.render(cam, 32, 48)).all()  # the hooks are gone and change nothing
+    assert not s.model.decoder.out_rgb._forward_pre_hooks
+
+
+def test_mixing_two_styles_blends_the_stylizer_outputs(stylized):
+    cam = Cameras.identity(stylized.photo.fov_y_deg)
+    g = np.random.default_rng(3)
+    a, b = g.random((32, 32, 3), dtype=np.float32), np.full((32, 32, 3), 0.9, np.float32)
+    stylized.set_strength(1.0)
+    stylized.set_style(b)
+    only_b = stylized.render(cam, 48, 64)
+    stylized.set_style(a)
+    only_a = stylized.render(cam, 48, 64)
+    stylized.set_second_style(b)
+    assert np.allclose(stylized.render(cam, 48, 64), only_a, atol=1e-6)  # mix 0: the first style
+    stylized.set_mix(1.0)
+    assert np.allclose(stylized.render(cam, 48, 64), only_b, atol=1e-5)  # mix 1: the second
+    stylized.set_mix(0.5)
+    half = stylized.render(cam, 48, 64)
+    assert not np.allclose(half, only_a, atol=1e-3) and not np.allclose(half, only_b, atol=1e-3)
+    with pytest.raises(InputError):
+        stylized.set_mix(1.5)
+    stylized.set_second_style(None)
+    assert np.allclose(stylized.render(cam, 48, 64), only_a, atol=1e-6)

@@ -2,7 +2,7 @@
 
     stylize3d-viewer [PHOTO] [--style STYLE] [--depth SPEC] [--refine-depth METHOD]
                      [--model CHECKPOINT | --no-model]
-                     [--max-size 640] [--fov DEG] [--strength 0.8] [--threads 1] [--size 1280x800]
+                     [--max-size 640] [--fov DEG] [--strength 0.8] [--threads 1] [--size 1280x800] [--invert-wheel]
                      [--test-script steps.json --test-report report.json]
 
 Modules: :mod:`.orbit` (camera math), :mod:`.state` (view state, scheduling),
@@ -52,6 +52,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--threads", type=int, default=1,
                    help="torch threads of the compute worker (default 1: on a 2-core machine the other core "
                         "draws the window; more threads only help on an otherwise idle machine with more cores)")
+    p.add_argument("--invert-wheel", action="store_true",
+                   help="wheel up moves backwards (default: wheel up moves forwards, as in common 3D viewers)")
     p.add_argument("--size", default="1280x800", metavar="WxH", help="window size in pixels (default 1280x800)")
     p.add_argument("--test-script", default=None, metavar="JSON", help="run these test steps (see app/viewer/script.py)")
     p.add_argument("--test-report", default=None, metavar="JSON", help="where the test script writes its report")
@@ -96,7 +98,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     app = gui.Application.instance
     app.initialize()
     viewer = ViewerWindow(ViewerOptions(spec=spec, style=args.style, model=model, use_model=not args.no_model,
-                                        strength=args.strength, width=width, height=height))
+                                        strength=args.strength, width=width, height=height,
+                                        invert_wheel=args.invert_wheel))
     import signal  # SIGINT / SIGTERM close the window like its close button (handled at the next GUI callback)
 
     received: List[int] = []

@@ -27,22 +27,26 @@ import threading
 import time
 import traceback
 from dataclasses import replace
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Optional
 
 import open3d.visualization.gui as gui
 
 from stylize3d_core.errors import InputError
 from stylize3d_core.io.camera_path import CameraPath, load_camera_path, save_camera_path
+from stylize3d_core.io.keyframes import load_keyframes, save_keyframes
 from stylize3d_core.io.images import save_image
 from stylize3d_core.io.video import ExportCancelled
 from stylize3d_core.render.plain import frame_size
 
+from . import keyframe_edit as KE
 from . import panel as P
 from .orbit import HOME
 from .session import NO_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE, ExportJob, StylizeInfo
 from .state import (
-    LOADED_PATH, ExportSettings, PhotoInfo, Playback, export_destination, fov_range, playback_frame,
-    shows_stylized, trajectory_cameras, view_camera,
+    LOADED_PATH, ExportSettings, PhotoInfo, Playback, export_destination, export_progress_text, fov_range,
+    path_source, playback_frame, push_recent,
+    screenshot_size, shows_stylized, trajectory_cameras, view_camera,
 )
 
 if TYPE_CHECKING:
@@ -93,8 +97,48 @@ class Controller:
                         on_error=lambda n, e: w.post(lambda: self.task_failed(n, e)), key=key)
 
 
+def style_thumbnail(path: str, px: int = P.THUMB_PX):
+    """A (px, px, 3) uint8 centre crop of an image file, for the style strip; None if it cannot be read."""
+    import cv2
+    import numpy as np
+
+    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if bgr is None:
+        return None
+    h, w = bgr.shape[:2]
+    side = min(h, w)
+    crop = bgr[(h - side) // 2:(h - side) // 2 + side, (w - side) // 2:(w - side) // 2 + side]
+    return np.ascontiguousarray(cv2.resize(crop, (px, px), interpolation=cv2.INTER_AREA)[:, :, ::-1])
+
+
+BUNDLED_STYLES = tuple(sorted(str(p) for p in Path(str(SAMPLE_STYLE)).parent.glob("*.jpg")))
+"""The style images shipped in ``assets/styles`` (the style strip shows them first)."""
+MAX_STRIP = 12
+
+
 class PhotoController(Controller):
-    """Photos, styles, the depth source and its edge alignment, the sample, encoding for the model."""
+    """Photos, styles, the depth source and its edge alignment, the sample, encoding for the model; recent
+    photos, the style strip (bundled and recently used styles), a second style and its mix."""
+
+    def __init__(self, window: "ViewerWindow") -> None:
+        super().__init__(window)
+        self.recent_photos: tuple = ()
+        self._strip: list = []
+
+    def build_strip(self) -> None:
+        """Thumbnails of the bundled styles (main thread, at start)."""
+        for path in BUNDLED_STYLES:
+            self._add_to_strip(path)
+
+    def _add_to_strip(self, path: str) -> None:
+        if path in self._strip or len(self._strip) >= MAX_STRIP:
+            return
+        thumb = style_thumbnail(path)
+        if thumb is None:
+            return
+        self._strip.append(path)
+        self.window.panel.add_style_thumbnail(thumb, os.path.basename(path), lambda: self.open_style(path))
+        self.window.window.set_needs_layout()
 
     def open_photo(self, path: str, depth: Optional[str] = None) -> None:
         """Build the 3D photo of ``path`` on the worker with the state's photo spec (and ``depth``, if
@@ -112,6 +156,13 @@ class PhotoController(Controller):
 
     def _loaded(self, info: PhotoInfo, spec: "PhotoSpec") -> None:
         w = self.window
+        self.recent_photos = push_recent(self.recent_photos, str(spec.photo))
+        combo = w.panel.recent_photos
+        combo.clear_items()
+        combo.add_item(P.RECENT_PHOTOS)
+        for path in self.recent_photos:
+            combo.add_item(os.path.basename(path))
+        combo.selected_index = 0
         w.state = replace(w.state, spec=spec, photo_info=info, stylize_available=False, pose=HOME, view_fov=None)
         p = w.panel
         h, wd = info.size
@@ -119,6 +170,7 @@ class PhotoController(Controller):
         lo, hi = fov_range(info.fov_y_deg)
         p.fov.set_limits(lo, hi)
         p.fov.double_value = info.fov_y_deg
+        p.fov_label.text = f"Field of view: {info.fov_y_deg:.1f} degrees"
         p.set_enabled(True)
         w.set_busy(f"3D photo ready in {info.seconds:.1f} s (depth: {info.depth_source})", 0.5)
         w.photo_changed()  # requests the first (plain) frame
@@ -152,9 +204,47 @@ class PhotoController(Controller):
     def _style_loaded(self, path: str) -> None:
         w = self.window
         w.state = replace(w.state, style=path)
+        self._add_to_strip(str(path))
         w.panel.style_label.text = os.path.basename(path)
-        w.set_busy("Style applied" if w.state.stylize_available else f"Style chosen ({NO_MODEL})", None)
+        if w.state.stylize_available:
+            w.set_busy("Style applied", None)
+        elif w.session.checkpoint_path() is not None:  # the model is still loading or encoding: no NO_MODEL flash
+            w.set_busy("Style chosen (shown once the model is ready)", None)
+        else:
+            w.set_busy(f"Style chosen ({NO_MODEL})", None)
         w.view_changed()
+
+    @ui_callback
+    def on_recent_photo(self, _text: str, index: int) -> None:
+        if 1 <= index <= len(self.recent_photos):
+            self.open_photo(self.recent_photos[index - 1])
+
+    def open_second_style(self, path: Optional[str]) -> None:
+        """Read a second style image on the worker to mix with the first (None removes it)."""
+        w = self.window
+        session = w.session
+        self.submit("open second style", lambda: session.load_second_style(path),
+                    lambda _hw: self._style2_loaded(path), key="style2")
+
+    def _style2_loaded(self, path: Optional[str]) -> None:
+        w = self.window
+        w.state = replace(w.state, style2=path)
+        w.panel.style2_label.text = "no second style" if path is None else os.path.basename(path)
+        w.set_status("Second style chosen: move Mix to blend" if path else "Second style removed")
+        w.view_changed()
+
+    def set_mix(self, value: float) -> None:
+        """Mix of the two styles in [0, 1] (a re-blend on the worker, then a new frame)."""
+        w = self.window
+        w.set_blend("mix", w.panel.mix, value, w.session.set_mix)
+
+    @ui_callback
+    def on_open_style2(self) -> None:
+        self.window.file_dialog(gui.FileDialog.OPEN, "Second style image", IMAGE_FILTERS, self.open_second_style)
+
+    @ui_callback
+    def on_mix(self, value: float) -> None:
+        self.set_mix(value)
 
     def load_sample(self) -> None:
         """Open the bundled sample photo and style."""
@@ -221,9 +311,11 @@ class CameraPathController(Controller):
     def on_trajectory(self, text: str, index: int) -> None:
         w = self.window
         if text == LOADED_PATH:
-            w.state = replace(w.state, use_loaded_path=True)
+            w.state = replace(w.state, use_loaded_path=True, use_keyframes=False)
         else:
-            w.state = replace(w.state, use_loaded_path=False, trajectory=replace(w.state.trajectory, name=text))
+            w.state = replace(w.state, use_loaded_path=False, use_keyframes=False,
+                              trajectory=replace(w.state.trajectory, name=text))
+        self.refresh()
 
     @ui_callback
     def on_trajectory_params(self, _value: float) -> None:
@@ -241,15 +333,29 @@ class CameraPathController(Controller):
     @ui_callback
     def toggle_preview(self) -> None:
         """Play the export's camera path in the view (the Preview button), or stop it."""
+        self.play(full=False)
+
+    @ui_callback
+    def on_preview_full(self) -> None:
+        """Play the keyframe path at full quality (frames the worker cannot keep up with are skipped)."""
+        w = self.window
+        if not self.playing:
+            w.state = replace(w.state, use_keyframes=w.state.keyframes is not None or w.state.use_keyframes)
+            self.refresh()
+        self.play(full=True)
+
+    def play(self, full: bool) -> None:
+        """Start (or stop, if playing) the camera-path preview; ``full`` renders full-quality frames."""
         w = self.window
         if w.state.photo_info is None:
             return
         if self.playing:
             self.stop()
             return
-        pb = Playback(self.export_cameras(), time.monotonic(), w.state.export.fps)
+        pb = Playback(self.export_cameras(), time.monotonic(), w.state.export.fps, full=full)
         w.state = replace(w.state, playback=pb)
         w.panel.preview_path.text = "Stop preview (C)"
+        w.panel.key_preview.text = "Stop preview"
 
     def step(self, now: float) -> None:
         """Tick: request the preview's camera for ``now``; stop at its end."""
@@ -257,19 +363,32 @@ class CameraPathController(Controller):
         pb = w.state.playback
         if pb is None:
             return
+        if pb.full:  # full quality: every frame in turn, each once the one before is on screen
+            if self._waiting:
+                return
+            i = pb.index + 1
+            if i >= len(pb.cameras):
+                self.stop()
+                return
+            w.state = replace(w.state, playback=replace(pb, index=i))
+            self._waiting = True
+            w.request_render(preview=False, camera=pb.cameras[i])
+            return
         i = playback_frame(pb, now)
         if i is None:
             self.stop()
         elif i != pb.index:
             w.state = replace(w.state, playback=replace(pb, index=i))
-            w.request_render(preview=True, camera=pb.cameras[i])
+            w.request_render(preview=not pb.full, camera=pb.cameras[i])
 
     def stop(self) -> None:
         """Stop the preview (if playing) and go back to the user's view."""
         w = self.window
+        self._waiting = False
         if w.state.playback is not None:
             w.state = replace(w.state, playback=None)
             w.panel.preview_path.text = "Preview (C)"
+            w.panel.key_preview.text = "Preview (full quality)"
             w.view_changed()
 
     # -- files --------------------------------------------------------------------------
@@ -291,11 +410,139 @@ class CameraPathController(Controller):
         w.state = replace(w.state, loaded_path=cp, use_loaded_path=True,
                           export=replace(w.state.export, fps=min(fps, 240.0)))
         p.fps.double_value = w.state.export.fps
+        w.state = replace(w.state, use_keyframes=False)
+        self.refresh()
         w.set_status(f"Camera path {os.path.basename(path)}: {len(cp.cameras)} frames")
+
+    # -- what the export follows; the keyframe editor -----------------------------------
+    def refresh(self) -> None:
+        """Show what the export follows: the trajectory's parameters only when it follows the trajectory."""
+        w = self.window
+        s, p = w.state, w.panel
+        source = path_source(s)
+        for n in (p.amp_x, p.amp_y, p.forward):
+            n.enabled = source == "trajectory"
+        p.use_keys.checked = s.use_keyframes
+        if source == "keyframes":
+            kp = s.keyframes
+            p.path_info.text = ("following the keyframes: none yet" if kp is None else
+                                f"following {len(kp.keyframes)} keyframes, {kp.duration_s:g} s")
+        elif source == "loaded":
+            n = 0 if s.loaded_path is None else len(s.loaded_path.cameras)
+            p.path_info.text = f"following the camera path file ({n} frames)"
+        else:
+            p.path_info.text = ""
+        labels = KE.keyframe_labels(s.keyframes)
+        p.key_list.set_items(labels)
+        if labels:
+            i = min(max(0, self._selected), len(labels) - 1)
+            self._selected = i
+            p.key_list.selected_index = i
+            k, d = s.keyframes.keyframes[i], s.keyframes.durations_s[i]
+            p.key_fov.double_value = k.fov_y_deg
+            p.key_seconds.double_value = d
+        p.key_loop.checked = bool(s.keyframes is not None and s.keyframes.loop)
+        for b in (p.key_up, p.key_down, p.key_delete, p.key_fov, p.key_seconds):
+            b.enabled = bool(labels)
+
+    _selected = 0
+    _waiting = False  # a full-quality preview frame is requested and not shown yet
+
+    def frame_shown(self) -> None:
+        """A frame reached the view (or failed): the full-quality preview may request the next one."""
+        self._waiting = False
+
+    def edit_keyframes(self, kp) -> None:
+        """Make ``kp`` the keyframe path (the export follows it) and show it."""
+        w = self.window
+        self.stop()
+        w.state = replace(w.state, keyframes=kp, use_keyframes=kp is not None or w.state.use_keyframes)
+        self.refresh()
+
+    @ui_callback
+    def add_keyframe(self) -> None:
+        """Add the current view as a keyframe after the selected one (K)."""
+        w = self.window
+        s = w.state
+        if s.photo_info is None:
+            return
+        cam = view_camera(s, s.photo_info.scene, s.photo_info.fov_y_deg)
+        after = self._selected if s.keyframes is not None else None
+        self._selected = 0 if s.keyframes is None else after + 1
+        self.edit_keyframes(KE.add_keyframe(s.keyframes, cam, after=after))
+        w.set_status(f"Keyframe {self._selected + 1} of {len(w.state.keyframes.keyframes)} added")
+
+    @ui_callback
+    def on_key_selected(self, _value: str, _double: bool) -> None:
+        self._selected = max(0, self.window.panel.key_list.selected_index)
+        self.refresh()
+
+    @ui_callback
+    def on_key_move(self, delta: int) -> None:
+        s = self.window.state
+        kp = KE.move_keyframe(s.keyframes, self._selected, delta)
+        self._selected = max(0, min(len(kp.keyframes) - 1, self._selected + delta))
+        self.edit_keyframes(kp)
+
+    @ui_callback
+    def on_key_delete(self) -> None:
+        kp = KE.delete_keyframe(self.window.state.keyframes, self._selected)
+        self._selected = max(0, self._selected - 1)
+        self.edit_keyframes(kp)
+
+    @ui_callback
+    def on_key_fov(self, value: float) -> None:
+        if self.window.state.keyframes is not None:
+            self.edit_keyframes(KE.set_keyframe_fov(self.window.state.keyframes, self._selected, value))
+
+    @ui_callback
+    def on_key_seconds(self, value: float) -> None:
+        if self.window.state.keyframes is not None:
+            self.edit_keyframes(KE.set_keyframe_duration(self.window.state.keyframes, self._selected, value))
+
+    @ui_callback
+    def on_key_loop(self, checked: bool) -> None:
+        self.edit_keyframes(KE.set_loop(self.window.state.keyframes, checked))
+
+    @ui_callback
+    def on_use_keys(self, checked: bool) -> None:
+        w = self.window
+        w.state = replace(w.state, use_keyframes=bool(checked))
+        self.refresh()
+
+    @ui_callback
+    def on_load_keys(self) -> None:
+        self.window.file_dialog(gui.FileDialog.OPEN, "Load keyframes", JSON_FILTERS, self.load_keyframes)
+
+    def load_keyframes(self, path: str) -> None:
+        """Read keyframes (or any camera path, as keyframes) on the worker and edit them."""
+        self.submit("load keyframes", lambda: load_keyframes(path), lambda r: self._keys_loaded(path, r))
+
+    def _keys_loaded(self, path: str, result) -> None:
+        kp, _fps = result
+        self._selected = 0
+        self.edit_keyframes(kp)
+        self.window.set_status(f"Keyframes {os.path.basename(path)}: {len(kp.keyframes)}")
+
+    @ui_callback
+    def on_save_keys(self) -> None:
+        self.window.file_dialog(gui.FileDialog.SAVE, "Save keyframes", JSON_FILTERS, self.save_keyframes,
+                                "keyframes.json")
+
+    def save_keyframes(self, path: str) -> None:
+        """Write the keyframes as camera-path JSON with their timing (on the worker)."""
+        s = self.window.state
+        if s.keyframes is None:
+            raise InputError("keyframes", "add a keyframe first (Add keyframe, K)")
+        kp, fps = s.keyframes, s.export.fps
+        size = None if s.photo_info is None else frame_size(s.photo_info.size, s.export.size)
+        self.submit("save keyframes", lambda: save_keyframes(path, kp, fps=fps, image_size=size),
+                    lambda out: self.window.set_status(f"Saved {out}"))
 
     @ui_callback
     def on_save_path(self) -> None:
-        self.window.file_dialog(gui.FileDialog.SAVE, "Save camera path", JSON_FILTERS, self.save_camera_path)
+        self.window.file_dialog(gui.FileDialog.SAVE, "Save camera path", JSON_FILTERS, self.save_camera_path,
+                                "camera_path.json")
 
     def save_camera_path(self, path: str) -> None:
         """Write the export's cameras as camera-path JSON (on the worker)."""
@@ -337,7 +584,8 @@ class ExportController(Controller):
         if w.state.photo_info is None or self.exporting:
             return
         fmt = w.state.export.format
-        w.file_dialog(gui.FileDialog.SAVE, f"Export ({fmt.upper()})", (), self.start_export)
+        w.file_dialog(gui.FileDialog.SAVE, f"Export ({fmt.upper()})", (), self.start_export,
+                      export_destination("stylized.mp4", fmt).rstrip("/"))
 
     def start_export(self, path: str) -> str:
         """Export the camera path to ``path`` on the worker, with progress and Cancel; returns the destination."""
@@ -352,11 +600,14 @@ class ExportController(Controller):
         job = ExportJob(dest, self.paths.export_cameras(), frame_size(s.photo_info.size, e.size), e.fps,
                         shows_stylized(s))
         cancel = self._cancel = threading.Event()
+        t0 = time.monotonic()
+        n = len(job.cameras)
 
         def progress(done: int, total: Optional[int]) -> None:
             if cancel.is_set():
                 raise ExportCancelled(f"{dest}: export cancelled")
-            w.post(lambda: w.set_busy(f"Exporting {done}/{total} frames ...", done / max(1, total or 1)))
+            text = export_progress_text(done, total or n, time.monotonic() - t0)
+            w.post(lambda: w.set_busy(text, done / max(1, total or n)))
 
         w.panel.cancel.enabled = True
         w.panel.export.enabled = False
@@ -388,6 +639,7 @@ class ExportController(Controller):
 
     @ui_callback
     def on_cancel(self) -> None:
+        """The Cancel button: stop the running export (nothing is written)."""
         if self.exporting:
             self.cancel()
             self.window.set_status("Cancelling the export ...")
@@ -396,21 +648,25 @@ class ExportController(Controller):
     def on_screenshot(self) -> None:
         if self.window.state.photo_info is None:
             return
-        self.window.file_dialog(gui.FileDialog.SAVE, "Save screenshot (PNG)", ((".png", "PNG"),), self.save_screenshot)
+        self.window.file_dialog(gui.FileDialog.SAVE, "Save screenshot (PNG)", ((".png", "PNG"),), self.save_screenshot,
+                                "screenshot.png")
 
     def save_screenshot(self, path: str) -> None:
-        """Save the view at full resolution: the frame on screen once it is final, else a fresh render."""
+        """Save the view at the view's size on screen (or the panel's screenshot size): the frame on screen
+        when it is final and of that size, else a fresh full-quality render."""
         w = self.window
         s = w.state
         if s.photo_info is None:
             raise InputError("photo", "open a photo first")
         path = path if path.lower().endswith((".png", ".jpg", ".jpeg", ".webp")) else path + ".png"
+        f = w.image.frame
+        size = screenshot_size(s.photo_info.size, (f.height, f.width), int(w.panel.shot_size.int_value))
         final = w.final_frame()
-        if final is not None:
+        if final is not None and final.image.shape[:2] == size:
             image = final.image
             job = lambda: save_image(path, image)  # noqa: E731
         else:
             cam = view_camera(s, s.photo_info.scene, s.photo_info.fov_y_deg)
-            size, stylized, session = w.display_hw, shows_stylized(s), w.session
+            stylized, session = shows_stylized(s), w.session
             job = lambda: save_image(path, session.render(cam, size[0], size[1], preview=False, stylized=stylized))  # noqa: E731
         self.submit("screenshot", job, lambda _: w.set_status(f"Saved {path}"))

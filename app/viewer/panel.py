@@ -7,7 +7,7 @@ theme's font size), so the layout follows the UI scale.
 
 from __future__ import annotations
 
-from typing import List, Optional, Tuple, get_args
+from typing import Callable, List, Optional, Sequence, Tuple, get_args
 
 import open3d.visualization.gui as gui
 
@@ -36,7 +36,7 @@ EXPORT_FORMATS: Tuple[Tuple[str, str], ...] = (("mp4", "MP4 video"), ("gif", "GI
 SHORTCUTS: Tuple[Tuple[str, str], ...] = (
     ("left-drag", "orbit about the scene centre"),
     ("right-drag / shift-drag", "pan"),
-    ("wheel, + / -, PgUp / PgDn", "move forwards / backwards"),
+    ("wheel up / down, + / -, PgUp / PgDn", "move forwards / backwards"),
     ("double-click, R", "reset the view"),
     ("arrow keys", "orbit in 1-degree steps"),
     ("O / S / D", "open photo / style / depth file"),
@@ -44,12 +44,20 @@ SHORTCUTS: Tuple[Tuple[str, str], ...] = (
     ("T", "stylized / original"),
     ("[ / ]", "strength -0.1 / +0.1"),
     ("C", "preview the camera path"),
+    ("K", "add the view as a keyframe"),
     ("E", "export a video"),
     ("P", "save a screenshot"),
     ("H or F1", "show / hide this help"),
-    ("Esc", "cancel the export, hide the help"),
-    ("", "(letter keys act after a click in the view)"),
+    ("Esc", "close the dialog, hide the help, stop the preview (never quits)"),
+    ("Ctrl+Q", "quit (asks first during an export)"),
+    ("", "(arrows and + / - act after a click in the view)"),
 )
+
+RECENT_PHOTOS = "Recent photos..."
+THUMBS_PER_ROW = 4
+THUMB_PX = 44
+SLIDER_TRACK = gui.Color(0.32, 0.32, 0.36, 1.0)
+"""Background of the sliders: Open3D's dark theme draws their track in the panel's colour (invisible)."""
 
 MENU_OPEN, MENU_STYLE, MENU_DEPTH, MENU_SAMPLE = 1, 2, 3, 4
 MENU_LOAD_PATH, MENU_SAVE_PATH, MENU_EXPORT, MENU_SCREENSHOT, MENU_QUIT = 5, 6, 7, 8, 9
@@ -70,7 +78,7 @@ def build_menubar() -> gui.Menu:
     file_menu.add_item("Export video...   E", MENU_EXPORT)
     file_menu.add_item("Save screenshot...   P", MENU_SCREENSHOT)
     file_menu.add_separator()
-    file_menu.add_item("Quit", MENU_QUIT)
+    file_menu.add_item("Quit   Ctrl+Q", MENU_QUIT)
     view_menu = gui.Menu()
     view_menu.add_item("Stylized   T", MENU_STYLIZED)
     view_menu.set_checked(MENU_STYLIZED, True)
@@ -84,6 +92,26 @@ def build_menubar() -> gui.Menu:
     bar.add_menu("View", view_menu)
     bar.add_menu("Help", help_menu)
     return bar
+
+
+def message_dialog(em: float, title: str, message: str,
+                   buttons: Sequence[Tuple[str, Callable[[], None]]]) -> gui.Dialog:
+    """A modal dialog: ``title``, ``message`` (wrapped by its line breaks) and a row of buttons, each
+    (label, callback); the first button is the default one."""
+    dlg = gui.Dialog(title)
+    box = gui.Vert(0.5 * em, gui.Margins(int(em), int(em), int(em), int(em)))
+    box.add_child(gui.Label(title))
+    for line in message.splitlines() or [""]:
+        box.add_child(gui.Label(line))
+    row = gui.Horiz(0.5 * em)
+    row.add_stretch()
+    for label, cb in buttons:
+        b = gui.Button(label)
+        b.set_on_clicked(cb)
+        row.add_child(b)
+    box.add_child(row)
+    dlg.add_child(box)
+    return dlg
 
 
 def _row(em: float, *widgets: gui.Widget) -> gui.Horiz:
@@ -126,21 +154,39 @@ class Panel:
         photo.add_child(_row(em, self.open_photo, self.sample))
         self.photo_label = gui.Label("no photo")
         photo.add_child(self.photo_label)
+        self.recent_photos = gui.Combobox()
+        self.recent_photos.add_item(RECENT_PHOTOS)
+        self.recent_photos.tooltip = "photos opened in this session"
+        photo.add_child(self.recent_photos)
         self.depth = gui.Combobox()
         for _, label in DEPTH_CHOICES:
             self.depth.add_item(label)
         self.depth_file = gui.Button("Depth file...")
-        photo.add_child(gui.Label("Depth"))
-        photo.add_child(self.depth)
-        photo.add_child(self.depth_file)
+        depth = gui.CollapsableVert("Depth", 0.3 * em, gui.Margins(int(0.5 * em), 0, 0, 0))
+        depth.add_child(self.depth)
+        depth.add_child(self.depth_file)
         self.refine = gui.Combobox()
         for _, label in REFINE_CHOICES:
             self.refine.add_item(label)
-        photo.add_child(self.refine)
+        depth.add_child(self.refine)
+        depth.set_is_open(False)  # rarely changed: keeps Export above the fold
+        photo.add_child(depth)
         self.open_style = gui.Button("Open style...")
         photo.add_child(self.open_style)
         self.style_label = gui.Label("no style")
         photo.add_child(self.style_label)
+        photo.add_child(gui.Label("Styles (click to apply)"))
+        self.style_strip = gui.VGrid(THUMBS_PER_ROW, 0.25 * em)
+        photo.add_child(self.style_strip)
+        self.open_style2 = gui.Button("Mix with...")
+        self.open_style2.tooltip = "a second style image to mix with the first"
+        self.style2_label = gui.Label("no second style")
+        photo.add_child(_row(em, self.open_style2, self.style2_label))
+        self.mix = gui.Slider(gui.Slider.DOUBLE)
+        self.mix.set_limits(0.0, 1.0)
+        self.mix.double_value = state.mix
+        self.mix.tooltip = "0: the first style, 1: the second"
+        photo.add_child(self.mix)
         self.root.add_child(photo)
 
         # Look: stylized / original, strength, FOV, reset.
@@ -148,19 +194,51 @@ class Panel:
         self.stylized = gui.ToggleSwitch("Stylized (T)")
         self.stylized.is_on = state.stylized
         look.add_child(self.stylized)
-        look.add_child(gui.Label("Style strength"))
+        self.strength_label = gui.Label(f"Style strength: {state.strength:.2f}")
+        look.add_child(self.strength_label)
         self.strength = gui.Slider(gui.Slider.DOUBLE)
         self.strength.set_limits(0.0, 1.0)
         self.strength.double_value = state.strength
         look.add_child(self.strength)
-        look.add_child(gui.Label("Field of view (degrees)"))
+        self.fov_label = gui.Label("Field of view: 60.0 degrees")  # (the slider's handle hides its own value)
+        look.add_child(self.fov_label)
         self.fov = gui.Slider(gui.Slider.DOUBLE)
         self.fov.set_limits(30.0, 90.0)
         self.fov.double_value = 60.0
         look.add_child(self.fov)
+        self.compare = gui.Checkbox("Before / after (original | stylized)")
+        look.add_child(self.compare)
+        self.split = gui.Slider(gui.Slider.DOUBLE)
+        self.split.set_limits(0.0, 1.0)
+        self.split.double_value = state.split
+        look.add_child(self.split)
         self.reset = gui.Button("Reset view (R)")
         look.add_child(self.reset)
+        for slider in (self.strength, self.fov, self.mix, self.split):  # the theme draws no track of its own
+            slider.background_color = SLIDER_TRACK
         self.root.add_child(look)
+
+        # Export.
+        export = gui.CollapsableVert("Export", 0.3 * em, gui.Margins(int(0.5 * em), 0, 0, 0))
+        self.format = gui.Combobox()
+        for _, label in EXPORT_FORMATS:
+            self.format.add_item(label)
+        export.add_child(self.format)
+        e: ExportSettings = state.export
+        grid = gui.VGrid(2, 0.3 * em)
+        self.size = _number(gui.NumberEdit.INT, e.size, 16, 4096)
+        self.frames = _number(gui.NumberEdit.INT, e.frames, 1, 10000)
+        self.fps = _number(gui.NumberEdit.DOUBLE, e.fps, 1.0, 240.0, decimals=1)
+        self.shot_size = _number(gui.NumberEdit.INT, 0, 0, 8192)
+        self.shot_size.tooltip = "long side of screenshots in pixels; 0: the view's size on screen"
+        for label, w in (("size (long side)", self.size), ("frames", self.frames), ("fps", self.fps),
+                         ("screenshot (0: view)", self.shot_size)):
+            grid.add_child(gui.Label(label))
+            grid.add_child(w)
+        export.add_child(grid)
+        self.export = gui.Button("Export... (E)")
+        self.screenshot = gui.Button("Screenshot (P)")
+        self.root.add_child(export)  # (its buttons are in the status area, always in sight)
 
         # Camera path: trajectory and its parameters, preview, load / save.
         path = gui.CollapsableVert("Camera path", 0.3 * em, gui.Margins(int(0.5 * em), 0, 0, 0))
@@ -179,6 +257,8 @@ class Panel:
             grid.add_child(gui.Label(label))
             grid.add_child(w)
         path.add_child(grid)
+        self.path_info = gui.Label("")
+        path.add_child(self.path_info)
         self.preview_path = gui.Button("Preview (C)")
         path.add_child(self.preview_path)
         self.load_path = gui.Button("Load...")
@@ -186,25 +266,34 @@ class Panel:
         path.add_child(_row(em, self.load_path, self.save_path))
         self.root.add_child(path)
 
-        # Export.
-        export = gui.CollapsableVert("Export", 0.3 * em, gui.Margins(int(0.5 * em), 0, 0, 0))
-        self.format = gui.Combobox()
-        for _, label in EXPORT_FORMATS:
-            self.format.add_item(label)
-        export.add_child(self.format)
-        e: ExportSettings = state.export
+        # Keyframe editor: keyframes from the view, their FOV and timing, loop, full-quality preview, files.
+        keys = gui.CollapsableVert("Keyframes", 0.3 * em, gui.Margins(int(0.5 * em), 0, 0, 0))
+        self.add_key = gui.Button("Add keyframe (K)")
+        self.add_key.tooltip = "add the current view as a keyframe after the selected one"
+        self.use_keys = gui.Checkbox("Export follows the keyframes")
+        keys.add_child(_row(em, self.add_key))
+        keys.add_child(self.use_keys)
+        self.key_list = gui.ListView()
+        self.key_list.set_max_visible_items(5)
+        keys.add_child(self.key_list)
+        self.key_up, self.key_down, self.key_delete = gui.Button("Up"), gui.Button("Down"), gui.Button("Delete")
+        keys.add_child(_row(em, self.key_up, self.key_down, self.key_delete))
         grid = gui.VGrid(2, 0.3 * em)
-        self.size = _number(gui.NumberEdit.INT, e.size, 16, 4096)
-        self.frames = _number(gui.NumberEdit.INT, e.frames, 1, 10000)
-        self.fps = _number(gui.NumberEdit.DOUBLE, e.fps, 1.0, 240.0, decimals=1)
-        for label, w in (("size (long side)", self.size), ("frames", self.frames), ("fps", self.fps)):
+        self.key_fov = _number(gui.NumberEdit.DOUBLE, 60.0, 1.0, 170.0, decimals=1)
+        self.key_seconds = _number(gui.NumberEdit.DOUBLE, 2.0, 0.05, 600.0, decimals=2)
+        for label, w in (("keyframe FOV", self.key_fov), ("seconds to next", self.key_seconds)):
             grid.add_child(gui.Label(label))
             grid.add_child(w)
-        export.add_child(grid)
-        self.export = gui.Button("Export... (E)")
-        self.screenshot = gui.Button("Screenshot (P)")
-        export.add_child(_row(em, self.export, self.screenshot))
-        self.root.add_child(export)
+        keys.add_child(grid)
+        self.key_loop = gui.Checkbox("Loop back to the first")
+        keys.add_child(self.key_loop)
+        self.key_preview = gui.Button("Preview (full quality)")
+        keys.add_child(self.key_preview)
+        self.key_load, self.key_save = gui.Button("Load keys..."), gui.Button("Save keys...")
+        keys.add_child(_row(em, self.key_load, self.key_save))
+        keys.set_is_open(False)
+        self.keys_section = keys
+        self.root.add_child(keys)
 
         # Status area: messages, progress, Cancel (always visible, below the scrolling panel).
         self.status_box = gui.Vert(0.3 * em, m)
@@ -219,12 +308,12 @@ class Panel:
         self.status_box.add_child(self.model_label)
         self.status_box.add_child(self.fps_label)
         self.status_box.add_child(self.progress)
-        self.status_box.add_child(self.cancel)
+        self.status_box.add_child(_row(em, self.export, self.screenshot, self.cancel))
 
         # Help overlay, drawn over the view.
         self.help = gui.Vert(0.2 * em, gui.Margins(int(em), int(em), int(em), int(em)))
         self.help.background_color = gui.Color(0.08, 0.08, 0.1, 0.88)
-        self.help.add_child(gui.Label("Keyboard and mouse  (H to close)"))
+        self.help.add_child(gui.Label("Keyboard and mouse  (H or Esc to close)"))
         grid = gui.VGrid(2, 0.3 * em)
         for key, what in SHORTCUTS:
             grid.add_child(gui.Label(key))
@@ -232,8 +321,26 @@ class Panel:
         self.help.add_child(grid)
         self.help.visible = False
 
+    def add_style_thumbnail(self, thumb_u8, tooltip: str, on_click) -> None:
+        """Add a clickable (THUMB_PX, THUMB_PX, 3) uint8 thumbnail to the style strip."""
+        import numpy as np
+        import open3d as o3d
+
+        img = gui.ImageWidget(o3d.geometry.Image(np.ascontiguousarray(thumb_u8)))
+        img.tooltip = tooltip
+
+        def on_mouse(e: gui.MouseEvent) -> int:
+            if e.type == gui.MouseEvent.Type.BUTTON_DOWN:
+                on_click()
+                return gui.Widget.EventCallbackResult.CONSUMED
+            return gui.Widget.EventCallbackResult.IGNORED
+
+        img.set_on_mouse(on_mouse)
+        self.style_strip.add_child(img)
+
     def set_enabled(self, photo_loaded: bool) -> None:
         """Enable the controls that need a photo."""
         for w in (self.stylized, self.strength, self.fov, self.reset, self.preview_path,
-                  self.save_path, self.load_path, self.export, self.screenshot):
+                  self.save_path, self.load_path, self.export, self.screenshot, self.add_key, self.key_preview,
+                  self.key_load, self.key_save):
             w.enabled = photo_loaded

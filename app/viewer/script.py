@@ -25,7 +25,12 @@ size, frames, fps), ``export`` (path, wait, timeout), ``wait_export``, ``cancel_
 ``screenshot`` (path), ``grab_window`` (path: the X screen cropped to the
 window, needs Pillow with XCB), ``save_camera_path`` / ``load_camera_path``
 (path), ``help`` (visible), ``expect_error`` (contains), ``state`` (records the
-view state), ``quit``.
+view state), ``status`` (exporting, dialog open, closing, render phase),
+``resize`` (width, height), ``add_keyframe``, ``edit_keyframe`` (index, fov,
+seconds, move, delete, loop), ``save_keyframes`` / ``load_keyframes`` (path),
+``preview_keys``, ``open_section`` (name), ``save_as`` (what, text: types a
+path into a Save dialog), ``style_strip`` (index), ``mix`` (path, value),
+``compare`` (split, on), ``quit``.
 """
 
 from __future__ import annotations
@@ -312,10 +317,124 @@ class ScriptRunner:
         while time.monotonic() < t_end:
             found = [e for e in self.window.errors if contains in e]
             if found:
-                self.main(self.window.window.close_dialog)
+                self.main(self.window.close_dialog)
                 return found[-1]
             time.sleep(0.05)
         raise AssertionError(f"no error dialog containing {contains!r}; errors so far: {self.window.errors}")
+
+    def op_status(self) -> Dict[str, Any]:
+        """What the window is doing: exporting, a dialog open, closing, the status line, render counters."""
+        w = self.window
+
+        def status() -> Dict[str, Any]:
+            return {"exporting": w.exports.exporting, "dialog_open": w.dialog_open, "closing": w._closing,
+                    "status": w.panel.status.text, "phase": w.scheduler.phase.value,
+                    "interrupted": w.worker.interrupted, "help_visible": w.panel.help.visible}
+
+        return self.main(status)
+
+    def op_save_as(self, what: str, text: str) -> Dict[str, Any]:
+        """Open a Save dialog ("screenshot", "camera_path", "export") as its shortcut does, type ``text``
+        in its path field and press Save."""
+        w = self.window
+        opener = {"screenshot": w.exports.on_screenshot, "camera_path": w.paths.on_save_path,
+                  "export": w.exports.on_export}[what]
+        self.main(opener)
+
+        def type_and_save() -> bool:
+            w.save_as_edit.text_value = text
+            w._save_as_ok()
+            return w.dialog_open
+
+        still_open = self.main(type_and_save)
+        self.op_wait_worker()
+        return {"dialog_open": still_open, "status": self.main(lambda: w.panel.status.text)}
+
+    def op_style_strip(self, index: int = 0) -> Dict[str, Any]:
+        """Click thumbnail ``index`` of the style strip (applies that style)."""
+        w = self.window
+        path = self.main(lambda: w.photos._strip[int(index)])
+        self.main(lambda: w.photos.open_style(path))
+        self.op_wait_worker()
+        return {"style": path, "strip": self.main(lambda: list(w.photos._strip))}
+
+    def op_mix(self, path: str, value: float) -> None:
+        """Choose a second style and mix it in by ``value``."""
+        self.main(lambda: self.window.photos.open_second_style(path))
+        self.main(lambda: self.window.photos.set_mix(float(value)))
+
+    def op_compare(self, split: float = 0.5, on: bool = True) -> None:
+        """The before / after split at ``split`` of the width (or off)."""
+        self.main(lambda: self.window.set_compare(bool(on), float(split)))
+
+    def op_add_keyframe(self) -> Dict[str, Any]:
+        """Add the current view as a keyframe (the K key / Add keyframe button)."""
+        w = self.window
+        self.main(w.paths.add_keyframe)
+        return self.main(lambda: {"keyframes": len(w.state.keyframes.keyframes), "labels": list(
+            __import__("app.viewer.keyframe_edit", fromlist=["x"]).keyframe_labels(w.state.keyframes))})
+
+    def op_edit_keyframe(self, index: int = 0, fov: float = None, seconds: float = None, move: int = 0,
+                         delete: bool = False, loop: bool = None) -> Dict[str, Any]:
+        """Select keyframe ``index`` in the editor's list, then change it as its widgets do."""
+        w, cp = self.window, self.window.paths
+
+        def edit() -> Dict[str, Any]:
+            cp._selected = int(index)
+            if fov is not None:
+                cp.on_key_fov(float(fov))
+            if seconds is not None:
+                cp.on_key_seconds(float(seconds))
+            if move:
+                cp.on_key_move(int(move))
+            if delete:
+                cp.on_key_delete()
+            if loop is not None:
+                cp.on_key_loop(bool(loop))
+            kp = w.state.keyframes
+            return {"keyframes": 0 if kp is None else len(kp.keyframes),
+                    "durations_s": [] if kp is None else list(kp.durations_s),
+                    "loop": bool(kp is not None and kp.loop), "use_keyframes": w.state.use_keyframes}
+
+        return self.main(edit)
+
+    def op_save_keyframes(self, path: str) -> None:
+        self.main(lambda: self.window.paths.save_keyframes(path))
+        self.op_wait_worker()
+
+    def op_load_keyframes(self, path: str) -> None:
+        self.main(lambda: self.window.paths.load_keyframes(path))
+        self.op_wait_worker()
+
+    def op_open_section(self, name: str = "keys") -> None:
+        """Open a collapsed panel section (for screenshots): "keys"."""
+        def open_it() -> None:
+            self.window.panel.keys_section.set_is_open(True)
+            self.window.window.set_needs_layout()
+
+        self.main(open_it)
+
+    def op_preview_keys(self, timeout: float = 300.0) -> Dict[str, Any]:
+        """Play the keyframe path at full quality (the editor's Preview button) and wait for its end."""
+        w = self.window
+        n0 = self.main(lambda: len(w.stats["full_seconds"]))
+        self.main(w.paths.on_preview_full)
+        t_end = time.monotonic() + float(timeout)
+        while w.paths.playing:
+            if time.monotonic() > t_end:
+                raise TimeoutError(f"the keyframe preview did not end within {timeout:g} s")
+            time.sleep(0.05)
+        return {"full_frames_shown": self.main(lambda: len(w.stats["full_seconds"])) - n0}
+
+    def op_resize(self, width: int, height: int) -> Dict[str, Any]:
+        """Ask for a window size (as a user dragging its border would), then report the size it has."""
+        self.main(lambda: setattr(self.window.window, "size", __import__("open3d").visualization.gui.Size(
+            int(width), int(height))))
+        time.sleep(1.0)
+        self.main(self.window.window.post_redraw)
+        time.sleep(0.5)
+        r = self.main(lambda: self.window.window.size)
+        return {"width": r.width, "height": r.height}
 
     def op_state(self) -> Dict[str, Any]:
         """The user's choices in the view state (what was loaded or is playing is left out), and whether
@@ -324,7 +443,7 @@ class ScriptRunner:
         def state() -> Dict[str, Any]:
             s = self.window.state
             doc = json.loads(json.dumps(asdict(user_choices(s)), default=str))
-            for name in ("photo_info", "loaded_path", "playback"):
+            for name in ("photo_info", "loaded_path", "playback", "keyframes"):
                 del doc[name]
             return {**doc, "photo_loaded": s.photo_info is not None, "stylized_shown": shows_stylized(s)}
 

@@ -29,7 +29,7 @@ import cv2
 import numpy as np
 
 from stylize3d_core import resources
-from stylize3d_core.errors import InputError
+from stylize3d_core.errors import InputError, RenderInterrupted
 from stylize3d_core.geometry.camera import Cameras
 from stylize3d_core.io.images import load_image, to_uint8
 from stylize3d_core.io.video import Progress, write_video
@@ -94,6 +94,21 @@ def display_image(rgb: np.ndarray, display_hw: Tuple[int, int]) -> np.ndarray:
     return np.ascontiguousarray(u8)
 
 
+def split_view(before: np.ndarray, after: np.ndarray, fraction: float) -> np.ndarray:
+    """Before / after comparison of two (H, W, 3) images: ``before`` left of ``fraction`` of the width,
+    ``after`` right of it, and a 1-pixel light line at the split (none at 0 or 1)."""
+    if before.shape != after.shape:
+        raise InputError("split view", f"image shapes differ: {before.shape} and {after.shape}")
+    f = float(min(1.0, max(0.0, fraction)))
+    w = before.shape[1]
+    col = int(round(f * w))
+    out = np.array(after, copy=True)
+    out[:, :col] = before[:, :col]
+    if 0 < col < w:
+        out[:, col] = 0.9
+    return out
+
+
 class ViewerSession:
     """The loaded 3D photo, renderers, model and style (see the module docstring).
 
@@ -114,6 +129,11 @@ class ViewerSession:
         self.style_path: Optional[str] = None
         self._style_rgb: Optional[np.ndarray] = None
         self.strength = 0.8
+        self.colour_gain: Optional[np.ndarray] = None  # (3,) per-channel gain of stylized previews
+        self._preview_hw: Optional[Tuple[int, int]] = None  # size of the last stylized preview
+        self.style2_path: Optional[str] = None
+        self._style2_rgb: Optional[np.ndarray] = None
+        self.mix = 0.0
 
     # -- model --------------------------------------------------------------------
     def checkpoint_path(self) -> Optional[Path]:
@@ -149,6 +169,7 @@ class ViewerSession:
         plain = PlainRenderer(photo.points, self.plain_settings)
         # Nothing failed: replace the old photo (and drop its encoding).
         self.photo, self._plain, self._stylized = photo, plain, None
+        self.colour_gain = None
         self.info = PhotoInfo(str(spec.photo), tuple(photo.size), plain.num_points, float(photo.fov_y_deg),
                               photo.depth.source, scene, time.perf_counter() - t0)
         return self.info
@@ -169,6 +190,9 @@ class ViewerSession:
         s = Stylized3DPhoto(self.photo, ck, StylizeSettings(strength=self.strength), style_encoder=self._style_encoder)
         if self._style_rgb is not None:
             s.set_style(self._style_rgb)
+        if self._style2_rgb is not None:
+            s.set_second_style(self._style2_rgb)
+        s.set_mix(self.mix)
         self._stylized = s
         stage = "" if ck.stage == 2 else f" (stage {ck.stage}: no style training)"
         return StylizeInfo(True, f"model {self.checkpoint_path().name}{stage}", time.perf_counter() - t0)
@@ -182,6 +206,26 @@ class ViewerSession:
         self._style_rgb, self.style_path = rgb, str(path)
         return rgb.shape[:2]
 
+    def load_second_style(self, path: Optional[str]) -> Optional[Tuple[int, int]]:
+        """Read a second style image to mix with the first (None removes it); returns its (h, w)."""
+        if path is None:
+            if self._stylized is not None:
+                self._stylized.set_second_style(None)
+            self._style2_rgb, self.style2_path = None, None
+            return None
+        rgb = load_image(str(path), max_size=STYLE_MAX_SIZE).rgb
+        if self._stylized is not None:
+            self._stylized.set_second_style(rgb)
+        self._style2_rgb, self.style2_path = rgb, str(path)
+        return rgb.shape[:2]
+
+    def set_mix(self, mix: float) -> float:
+        """Mix of the two styles in [0, 1] (cheap: re-blends the two styles' cached features)."""
+        if self._stylized is not None:
+            self._stylized.set_mix(mix)
+        self.mix = float(mix)
+        return self.mix
+
     def set_strength(self, strength: float) -> float:
         """Style strength in [0, 1] (cheap: re-blends the cached features)."""
         if self._stylized is not None:
@@ -190,19 +234,55 @@ class ViewerSession:
         return self.strength
 
     # -- rendering ----------------------------------------------------------------
-    def render(self, camera: Cameras, height: int, width: int, *, preview: bool, stylized: bool) -> np.ndarray:
-        """One view (H, W, 3) float32 in [0, 1]: through the model when ``stylized`` and available."""
+    def render(self, camera: Cameras, height: int, width: int, *, preview: bool, stylized: bool,
+               should_stop: Optional[Callable[[], bool]] = None) -> np.ndarray:
+        """One view (H, W, 3) float32 in [0, 1]: through the model when ``stylized`` and available.
+
+        ``should_stop`` is checked between stages; once it returns True the render
+        raises :class:`~stylize3d_core.errors.RenderInterrupted`.
+        """
         if self.photo is None:
             raise InputError("photo", "open a photo first")
         if stylized and self._stylized is not None:
-            return self._stylized.render(camera, height, width, preview=preview)
+            return self._stylized.render(camera, height, width, preview=preview, should_stop=should_stop)
+        if should_stop is not None and should_stop():
+            raise RenderInterrupted("render stopped before rasterizing")
         return self._plain.render(camera, height, width, preview=preview)
 
     def render_view(self, camera: Cameras, size: Tuple[int, int], display_hw: Tuple[int, int], *,
-                    preview: bool, stylized: bool) -> ViewFrame:
-        """Render at ``size`` (H, W) and convert for display at ``display_hw``."""
-        rgb = self.render(camera, size[0], size[1], preview=preview, stylized=stylized)
+                    preview: bool, stylized: bool, should_stop: Optional[Callable[[], bool]] = None,
+                    split: Optional[float] = None) -> ViewFrame:
+        """Render at ``size`` (H, W) and convert for display at ``display_hw`` (``should_stop``: see :meth:`render`).
+
+        ``split`` in [0, 1] (stylized views only): a before / after comparison, the original 3D photo
+        left of that fraction of the width and the stylized view right of it (see :func:`split_view`)."""
+        rgb = self.render(camera, size[0], size[1], preview=preview, stylized=stylized, should_stop=should_stop)
+        if stylized and self.can_stylize:
+            if preview:
+                self._preview_hw = (int(size[0]), int(size[1]))
+                if self.colour_gain is not None:
+                    rgb = np.clip(rgb * self.colour_gain, 0.0, 1.0)
+            else:
+                self.calibrate_previews(camera, rgb)
+        if split is not None and stylized and self.can_stylize:
+            before = self.render(camera, size[0], size[1], preview=preview, stylized=False)
+            rgb = split_view(before, rgb, split)
         return ViewFrame(display_image(rgb, display_hw), tuple(size), stylized and self.can_stylize, preview)
+
+    def calibrate_previews(self, camera: Cameras, full: np.ndarray) -> Optional[np.ndarray]:
+        """Match the colours of stylized previews to the full frame ``full`` of ``camera``: the decoder
+        paints a small preview of fewer points a little differently (greener, at 96 px), so each release
+        would visibly jump. Renders one preview of the same camera at the last preview size and keeps the
+        per-channel gain (mean of the full frame / mean of the preview, within [0.8, 1.25]) that later
+        previews are multiplied by. Returns the gain (None before any preview)."""
+        if self._preview_hw is None or self._stylized is None:
+            return None
+        h, w = self._preview_hw
+        small = self._stylized.render(camera, h, w, preview=True)
+        m_full = full.reshape(-1, 3).mean(0)
+        m_prev = small.reshape(-1, 3).mean(0)
+        self.colour_gain = np.clip(m_full / np.maximum(m_prev, 1e-3), 0.8, 1.25).astype(np.float32)
+        return self.colour_gain
 
     def export(self, job: ExportJob, progress: Optional[Progress] = None,
                between_frames: Optional[Callable[[], object]] = None) -> Path:

@@ -9,15 +9,16 @@ camera-path :class:`Playback`; the window replaces it with
 worker, so no state is shared between threads. :func:`shows_stylized` is the
 one rule for whether the view goes through the model.
 
-:class:`FrameScheduler` decides when a frame is needed: a low-resolution preview
-at once after every change, the full-resolution frame once the view has rested
-for ``rest_delay_s``. :func:`adapt_preview_long_side` keeps previews within their
-time budget (>= 10 fps) by shrinking or growing the preview size.
+When a frame is needed (a preview at once after every change, the full frame
+once the view rests) is :mod:`app.viewer.render_state`'s state machine.
+:func:`adapt_preview_long_side` keeps previews within their
+time budget (~24 fps) by shrinking or growing the preview size.
 """
 
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Literal, NamedTuple, Optional, Tuple, get_args
@@ -25,6 +26,7 @@ from typing import Literal, NamedTuple, Optional, Tuple, get_args
 from stylize3d_core.checks import check_choice, check_range
 from stylize3d_core.errors import InputError
 from stylize3d_core.geometry.camera import Cameras, check_fov
+from stylize3d_core.geometry.keyframes import KeyframePath, interpolate_keyframes
 from stylize3d_core.io.camera_path import CameraPath
 from stylize3d_core.geometry.trajectories import TrajectoryName, TrajectorySettings, make_trajectory
 from stylize3d_core.io.video import MAX_GIF_FPS
@@ -78,8 +80,9 @@ class PreviewSettings:
         min_preview_long_side: smallest preview the adaptation may choose. Default 96.
         max_preview_long_side: largest preview the adaptation may choose. Default 320.
         full_long_side: cap on the full-resolution frame's long side (it fits the view). Default 768.
-        target_preview_s: time budget of rendering one preview frame. Default 0.06: with the
-            hand-over to the GUI thread and its redraw, a frame reaches the screen in about 0.1 s (10 fps).
+        target_preview_s: time budget of rendering one preview frame. Default 0.035: with the
+            hand-over to the GUI thread, a frame every ~1/24 s while dragging (>= 24 fps where the
+            display keeps up); the size follows the measured render time (:func:`adapt_preview_long_side`).
         rest_delay_s: the camera must rest this long before the full frame is rendered. Default 0.15.
     """
 
@@ -87,7 +90,7 @@ class PreviewSettings:
     min_preview_long_side: int = 96
     max_preview_long_side: int = 320
     full_long_side: int = 768
-    target_preview_s: float = 0.06
+    target_preview_s: float = 0.035
     rest_delay_s: float = 0.15
 
     def __post_init__(self) -> None:
@@ -120,12 +123,14 @@ class Playback:
         start: ``time.monotonic()`` when it started.
         fps: frames per second.
         index: the camera last requested (-1: none yet).
+        full: render each frame at full quality (the keyframe editor's preview) instead of as a preview.
     """
 
     cameras: Cameras
     start: float
     fps: float
     index: int = -1
+    full: bool = False
 
     def __post_init__(self) -> None:
         check_range(self.fps, "playback fps", 1e-3, 1000.0)
@@ -149,11 +154,18 @@ class ViewState:
         style: path of the style image, or None.
         model: checkpoint path, or None for the default ``assets/model/stylize3d_lite.safetensors``.
         strength: style strength in [0, 1]. Default 0.8.
+        style2: path of a second style image to mix with the first, or None.
+        mix: mix of the two styles in [0, 1] (0: the first only). Default 0.
+        compare: show a before / after split of the view (original left, stylized right).
+        split: where the before / after split is, as a fraction of the width. Default 0.5.
         stylized: show the stylized view (True, default) or the original 3D photo.
         view_fov: vertical FOV of the view in degrees; None = the photo's FOV.
         pose: the camera relative to the input view.
         trajectory: the camera-path shape and its parameters (frames come from ``export``).
         use_loaded_path: follow the camera path loaded from JSON instead of ``trajectory``.
+        keyframes: the keyframe editor's path, or None (no keyframe yet).
+        use_keyframes: follow the keyframe path (at ``export.fps``) instead of the trajectory or the
+            loaded path.
         export: export settings.
 
     What was loaded and what is playing:
@@ -169,11 +181,17 @@ class ViewState:
     style: Optional[str] = None
     model: Optional[str] = None
     strength: float = 0.8
+    style2: Optional[str] = None
+    mix: float = 0.0
+    compare: bool = False
+    split: float = 0.5
     stylized: bool = True
     view_fov: Optional[float] = None
     pose: OrbitPose = HOME
     trajectory: TrajectorySettings = field(default_factory=TrajectorySettings)
     use_loaded_path: bool = False
+    keyframes: Optional[KeyframePath] = None
+    use_keyframes: bool = False
     export: ExportSettings = field(default_factory=ExportSettings)
     photo_info: Optional[PhotoInfo] = None
     stylize_available: bool = False
@@ -184,6 +202,8 @@ class ViewState:
         if not isinstance(self.spec, PhotoSpec):
             raise InputError("spec", f"expected a PhotoSpec, got {type(self.spec).__name__}")
         check_range(self.strength, "strength", 0.0, 1.0)
+        check_range(self.mix, "style mix", 0.0, 1.0)
+        check_range(self.split, "split", 0.0, 1.0)
         if self.view_fov is not None:
             check_fov(self.view_fov, "view fov")
         check_choice(self.trajectory.name, "trajectory", get_args(TrajectoryName))
@@ -197,7 +217,7 @@ def shows_stylized(state: ViewState) -> bool:
 
 def user_choices(state: ViewState) -> ViewState:
     """``state`` without what was loaded or is playing (for reports: no arrays, no cameras)."""
-    return replace(state, photo_info=None, loaded_path=None, playback=None)
+    return replace(state, photo_info=None, loaded_path=None, playback=None, keyframes=None)
 
 
 def view_fov(state: ViewState, photo_fov_deg: float) -> float:
@@ -220,11 +240,16 @@ def trajectory_cameras(state: ViewState, scene: OrbitScene, photo_fov_deg: float
                        loaded: Optional[Cameras] = None) -> Cameras:
     """The cameras "Export" renders.
 
-    The loaded camera path as it is, when ``state.use_loaded_path``; else the
+    The keyframe path sampled at ``state.export.fps``, when ``state.use_keyframes``;
+    the loaded camera path as it is, when ``state.use_loaded_path``; else the
     trajectory with ``state.export.frames`` frames and the view's FOV, started
     from the current view (each trajectory pose is composed with the orbit pose,
     so the video moves around what the user is looking at).
     """
+    if state.use_keyframes:
+        if state.keyframes is None:
+            raise InputError("keyframes", "add a keyframe first (Add keyframe, K)")
+        return interpolate_keyframes(state.keyframes, state.export.fps)
     if state.use_loaded_path:
         if loaded is None:
             raise InputError("camera path", "no camera path is loaded")
@@ -240,6 +265,14 @@ def full_frame_size(photo_hw: Tuple[int, int], view_hw: Tuple[int, int], cap: in
     fit = min(vh / h, vw / w)  # scale at which the photo fills the view
     long_side = int(min(cap, max(32, math.floor(fit * max(h, w)))))
     return frame_size(photo_hw, long_side)
+
+
+def screenshot_size(photo_hw: Tuple[int, int], view_hw: Tuple[int, int], long_side: int = 0) -> Tuple[int, int]:
+    """(H, W) of a screenshot: ``long_side`` (the photo's aspect) if > 0, else the view's size on screen
+    (the photo fitted into ``view_hw``, no cap)."""
+    if long_side and long_side > 0:
+        return frame_size(photo_hw, int(min(8192, max(16, long_side))))
+    return full_frame_size(photo_hw, view_hw, 8192)
 
 
 def adapt_preview_long_side(current: int, seconds: float, settings: PreviewSettings = PreviewSettings()) -> int:
@@ -262,6 +295,51 @@ def adapt_preview_long_side(current: int, seconds: float, settings: PreviewSetti
     return int(min(settings.max_preview_long_side, max(settings.min_preview_long_side, nxt)))
 
 
+def wheel_ticks(wheel_dy: float, invert: bool = False) -> float:
+    """Forward wheel steps from Open3D's ``wheel_dy`` (positive for wheel up under X11, as GLFW's scroll
+    offset): wheel up moves forwards, as in common 3D viewers (Blender, MeshLab, nerfstudio); ``invert``
+    swaps it."""
+    ticks = float(wheel_dy)
+    return -ticks if invert else ticks
+
+
+def export_progress_text(done: int, total: int, elapsed_s: float) -> str:
+    """"Exporting 12/90 frames, 0:04 elapsed, about 0:26 left" (no estimate before the first frame)."""
+    def clock(seconds: float) -> str:
+        m, sec = divmod(int(round(max(0.0, seconds))), 60)
+        return f"{m}:{sec:02d}"
+
+    text = f"Exporting {done}/{total} frames, {clock(elapsed_s)} elapsed"
+    if done > 0 and total > done:
+        text += f", about {clock(elapsed_s / done * (total - done))} left"
+    return text
+
+
+def path_source(state: ViewState) -> str:
+    """What the export follows: "keyframes", "loaded" (a camera-path file) or "trajectory"."""
+    if state.use_keyframes:
+        return "keyframes"
+    return "loaded" if state.use_loaded_path else "trajectory"
+
+
+def resolve_typed_path(text: str, folder: Optional[str]) -> str:
+    """The file a typed path names: ``~`` expanded; an absolute path as it is; a relative one inside
+    ``folder`` (the dialog's folder; the working directory if None)."""
+    t = os.path.expanduser(str(text).strip())
+    if not t:
+        raise InputError("file name", "type a file name or path")
+    if os.path.isabs(t):
+        return os.path.normpath(t) + ("/" if t.endswith("/") else "")
+    base = folder or os.getcwd()
+    return os.path.normpath(os.path.join(base, t)) + ("/" if t.endswith("/") else "")
+
+
+def push_recent(recent: Tuple[str, ...], path: str, limit: int = 8) -> Tuple[str, ...]:
+    """``recent`` with ``path`` first (moved there if present), at most ``limit`` entries."""
+    p = str(path)
+    return ((p,) + tuple(r for r in recent if r != p))[: max(1, int(limit))]
+
+
 def export_destination(path: str, fmt: ExportFormat) -> str:
     """``path`` with the suffix ``fmt`` needs (MP4/GIF), or a folder path for PNG frames."""
     check_choice(fmt, "export format", get_args(ExportFormat))
@@ -269,49 +347,6 @@ def export_destination(path: str, fmt: ExportFormat) -> str:
     if fmt == "png":
         return str(p.with_suffix("")) + "/" if p.suffix else (path if path.endswith("/") else path + "/")
     return str(p.with_suffix(EXPORT_SUFFIX[fmt])) if p.suffix.lower() != EXPORT_SUFFIX[fmt] else path
-
-
-class FrameScheduler:
-    """When the live view needs a preview and when the full frame (pure bookkeeping, times passed in).
-
-    Runs on the GUI main thread only (no locks). ``version`` counts view changes;
-    a frame rendered for an older version is out of date.
-    """
-
-    def __init__(self, rest_delay_s: float = PreviewSettings().rest_delay_s) -> None:
-        self.rest_delay_s = check_range(rest_delay_s, "rest_delay_s", 0.0, 10.0)
-        self.version = 0
-        self._changed_at = -math.inf
-        self._full_requested = -1  # version whose full frame was requested
-        self._full_shown = -1  # version whose full frame is on screen
-
-    def changed(self, now: float) -> int:
-        """The view changed at ``now`` (camera, strength, style, size...): returns the new version."""
-        self.version += 1
-        self._changed_at = now
-        return self.version
-
-    def full_due(self, now: float) -> bool:
-        """True once the view has rested ``rest_delay_s`` and its full frame was not requested yet."""
-        return self._full_requested < self.version and now - self._changed_at >= self.rest_delay_s
-
-    def full_requested(self) -> None:
-        """The full frame of the current version was requested."""
-        self._full_requested = self.version
-
-    def shown(self, version: int, preview: bool) -> None:
-        """A frame of ``version`` is on screen."""
-        if not preview:
-            self._full_shown = max(self._full_shown, version)
-
-    def full_failed(self, version: int) -> None:
-        """The full frame of ``version`` could not be rendered: ask again after the next change only."""
-        self._full_shown = max(self._full_shown, version)
-
-    @property
-    def settled(self) -> bool:
-        """True when the full frame of the current version is on screen."""
-        return self._full_shown >= self.version
 
 
 def clamp_state_pose(state: ViewState, scene: OrbitScene, limits: OrbitLimits = OrbitLimits()) -> ViewState:

@@ -26,6 +26,7 @@ thread posts to a destroyed window and nothing closes from a tick callback
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 import traceback
@@ -44,13 +45,19 @@ from . import panel as P
 from .actions import CameraPathController, ExportController, PhotoController, ui_callback
 from .orbit import HOME, OrbitLimits, apply_drag, apply_wheel, orbit
 from .session import NO_MODEL, ViewerSession, ViewFrame
+from .render_state import RenderStateMachine
 from .state import (
-    VIEWER_MAX_SIZE, FrameScheduler, PreviewSettings, ViewState, adapt_preview_long_side, full_frame_size,
-    shows_stylized, view_camera, view_fov,
+    VIEWER_MAX_SIZE, PreviewSettings, ViewState, adapt_preview_long_side, full_frame_size,
+    resolve_typed_path, shows_stylized, view_camera, view_fov, wheel_ticks,
 )
 from .worker import ComputeWorker, RenderResult
 
 DOUBLE_CLICK_S = 0.35
+CLOSE_GRACE_S = 0.25
+"""Open3D turns the Esc key into a close request *before* it delivers the key event, so a close request
+waits this long for an Esc key-down that follows it: if one comes, it was Esc (cancel / hide), not a close."""
+MIN_WINDOW = (640, 480)
+"""Smallest window (width, height): below it the panel and the view do not fit."""
 
 
 @dataclass(frozen=True)
@@ -64,6 +71,8 @@ class ViewerOptions:
         use_model: False shows the plain 3D photo even when a model is available.
         strength: style strength in [0, 1].
         width, height: window size in pixels.
+        invert_wheel: wheel up moves backwards (default False: wheel up moves forwards, as in common
+            3D viewers).
     """
 
     spec: PhotoSpec = PhotoSpec(max_size=VIEWER_MAX_SIZE)
@@ -73,6 +82,7 @@ class ViewerOptions:
     strength: float = 0.8
     width: int = 1280
     height: int = 800
+    invert_wheel: bool = False
 
 
 class ViewerWindow:
@@ -95,7 +105,7 @@ class ViewerWindow:
                                strength=options.strength)
         self.limits = OrbitLimits()
         self.preview = PreviewSettings()
-        self.scheduler = FrameScheduler(self.preview.rest_delay_s)
+        self.scheduler = RenderStateMachine(self.preview.rest_delay_s)
         self.session = ViewerSession(options.model, use_model=options.use_model)
         self.worker = ComputeWorker(on_error=lambda name, e: self._post(lambda: self.show_error(name, e)))
         self.photos = PhotoController(self)
@@ -103,7 +113,8 @@ class ViewerWindow:
         self.exports = ExportController(self, self.paths)
         self.errors: List[str] = []
         self.stats: Dict[str, Any] = {"preview_seconds": [], "full_seconds": [], "full_latency": [], "preview_shown": [],
-                                      "preview_latency": [], "post_delay": []}
+                                      "preview_latency": [], "post_delay": [], "mouse_down": [],
+                                      "drag_moves": [], "full_shown": []}
         self.script_thread: Optional[threading.Thread] = None
         self._preview_side = self.preview.preview_long_side
         self._display_hw: Tuple[int, int] = (0, 0)
@@ -112,8 +123,13 @@ class ViewerWindow:
         self._requested_at: Dict[int, float] = {}
         self._drag: Optional[List[Any]] = None  # [mode, last x, last y]
         self._last_click = (-1.0, 0, 0)
+        self._ctrl_down = False
         self._closing = False
         self._shutdown_done = False
+        self._close_pending: Optional[float] = None  # monotonic time of a close request waiting for CLOSE_GRACE_S
+        self._dialog_open = False
+        self._status_before_error: Optional[str] = None
+        self.last_folder: Optional[str] = None  # where the last file dialog chose a file
         self._build()
         self.worker.start()
         if options.style:
@@ -141,6 +157,12 @@ class ViewerWindow:
         p.open_photo.set_on_clicked(ph.on_open_photo)
         p.sample.set_on_clicked(ph.on_sample)
         p.open_style.set_on_clicked(ph.on_open_style)
+        p.recent_photos.set_on_selection_changed(ph.on_recent_photo)
+        p.open_style2.set_on_clicked(ph.on_open_style2)
+        p.mix.set_on_value_changed(ph.on_mix)
+        p.compare.set_on_checked(self._on_compare)
+        p.split.set_on_value_changed(self._on_split)
+        ph.build_strip()
         p.depth.set_on_selection_changed(ph.on_depth_choice)
         p.depth_file.set_on_clicked(ph.on_open_depth)
         p.refine.set_on_selection_changed(ph.on_refine_choice)
@@ -157,10 +179,23 @@ class ViewerWindow:
         p.format.set_on_selection_changed(ex.on_export_params)
         for n in (p.size, p.frames, p.fps):
             n.set_on_value_changed(ex.on_export_params)
+        p.add_key.set_on_clicked(cp.add_keyframe)
+        p.use_keys.set_on_checked(cp.on_use_keys)
+        p.key_list.set_on_selection_changed(cp.on_key_selected)
+        p.key_up.set_on_clicked(lambda: cp.on_key_move(-1))
+        p.key_down.set_on_clicked(lambda: cp.on_key_move(1))
+        p.key_delete.set_on_clicked(cp.on_key_delete)
+        p.key_fov.set_on_value_changed(cp.on_key_fov)
+        p.key_seconds.set_on_value_changed(cp.on_key_seconds)
+        p.key_loop.set_on_checked(cp.on_key_loop)
+        p.key_preview.set_on_clicked(cp.on_preview_full)
+        p.key_load.set_on_clicked(cp.on_load_keys)
+        p.key_save.set_on_clicked(cp.on_save_keys)
         p.export.set_on_clicked(ex.on_export)
         p.screenshot.set_on_clicked(ex.on_screenshot)
         p.cancel.set_on_clicked(ex.on_cancel)
         p.set_enabled(False)
+        cp.refresh()
         menu = {
             P.MENU_OPEN: ph.on_open_photo, P.MENU_STYLE: ph.on_open_style, P.MENU_DEPTH: ph.on_open_depth,
             P.MENU_SAMPLE: ph.on_sample, P.MENU_LOAD_PATH: cp.on_load_path, P.MENU_SAVE_PATH: cp.on_save_path,
@@ -173,6 +208,9 @@ class ViewerWindow:
 
     @ui_callback
     def _on_layout(self, ctx: gui.LayoutContext) -> None:
+        size = self.window.size
+        if size.width < MIN_WINDOW[0] or size.height < MIN_WINDOW[1]:  # Open3D has no minimum size: grow back
+            self.window.size = gui.Size(max(size.width, MIN_WINDOW[0]), max(size.height, MIN_WINDOW[1]))
         r = self.window.content_rect
         em, p = self.em, self.panel
         pw = int(P.Panel.WIDTH_EM * em)
@@ -260,11 +298,44 @@ class ViewerWindow:
 
     # -- errors and status ------------------------------------------------------------
     def show_error(self, what: str, error: BaseException) -> None:
-        """Show ``error`` in a dialog and keep it for the test report (main thread)."""
+        """Show ``error`` in a dialog and keep it for the test report (main thread). The status line says
+        "Error (what)" while the dialog is open and goes back to what it said when it is closed."""
         message = str(error) if isinstance(error, InputError) else f"{type(error).__name__}: {error}"
         self.errors.append(f"{what}: {message}")
+        if self._status_before_error is None:
+            self._status_before_error = self.panel.status.text
         self.panel.status.text = f"Error ({what})"
-        self.window.show_message_box("stylize3d: " + what, message)
+        self.show_message("stylize3d: " + what, message)
+
+    def show_message(self, title: str, message: str, buttons=None) -> None:
+        """A modal message with buttons ((label, callback); default a single OK that closes it)."""
+        def close_then(cb: Optional[Callable[[], None]]) -> Callable[[], None]:
+            def run() -> None:
+                self.close_dialog()
+                if cb is not None:
+                    cb()
+            return run
+
+        buttons = buttons or [("OK", None)]
+        self.show_dialog(P.message_dialog(self.em, title, message, [(label, close_then(cb)) for label, cb in buttons]))
+
+    def show_dialog(self, dlg: gui.Dialog) -> None:
+        """Show a modal dialog (letter shortcuts are off while one is open)."""
+        self._dialog_open = True
+        self.window.show_dialog(dlg)
+        self.window.post_redraw()  # Open3D draws a new dialog's first frame garbled until the next redraw
+
+    def close_dialog(self) -> None:
+        """Close the open dialog; an error's status line goes back to what it said before."""
+        self._dialog_open = False
+        self.window.close_dialog()
+        if self._status_before_error is not None:
+            self.panel.status.text = self._status_before_error
+            self._status_before_error = None
+
+    @property
+    def dialog_open(self) -> bool:
+        return self._dialog_open
 
     def set_status(self, text: str) -> None:
         """Show ``text`` in the status line."""
@@ -276,31 +347,82 @@ class ViewerWindow:
             self.panel.status.text = text
         self.panel.progress.value = 0.0 if fraction is None else float(min(1.0, max(0.0, fraction)))
 
-    def file_dialog(self, mode, title: str, filters, on_done: Callable[[str], None]) -> None:
-        """Show a file dialog; ``on_done(path)`` runs when a file is chosen (its errors become a dialog)."""
+    def file_dialog(self, mode, title: str, filters, on_done: Callable[[str], None], default_name: str = "") -> None:
+        """Choose a file; ``on_done(path)`` runs with it (its errors become a dialog). Open uses Open3D's
+        file browser in the last used folder; Save asks for a typed path first (absolute, ``~/...``, or
+        relative to the last used folder), with Browse... for the file browser."""
+        if mode == gui.FileDialog.SAVE:
+            self._save_as(title, filters, on_done, default_name)
+        else:
+            self._browse(mode, title, filters, on_done)
+
+    def _run_chosen(self, title: str, on_done: Callable[[str], None], path: str) -> None:
+        self.close_dialog()
+        self.last_folder = os.path.dirname(path.rstrip("/")) or self.last_folder
+        try:
+            on_done(path)
+        except Exception as e:  # reported to the user; the session stays usable
+            self.show_error(title, e)
+
+    def _browse(self, mode, title: str, filters, on_done: Callable[[str], None]) -> None:
         dlg = gui.FileDialog(mode, title, self.window.theme)
         for ext, desc in filters:
             dlg.add_filter(ext, desc)
+        if self.last_folder:
+            dlg.set_path(self.last_folder)
+        dlg.set_on_cancel(self.close_dialog)
+        dlg.set_on_done(lambda path: self._run_chosen(title, on_done, path))
+        self.show_dialog(dlg)
 
-        def done(path: str) -> None:
-            self.window.close_dialog()
+    def _save_as(self, title: str, filters, on_done: Callable[[str], None], default_name: str) -> None:
+        folder = self.last_folder or os.getcwd()
+        em = self.em
+        dlg = gui.Dialog(title)
+        box = gui.Vert(0.5 * em, gui.Margins(int(em), int(em), int(em), int(em)))
+        box.add_child(gui.Label(title))
+        box.add_child(gui.Label(f"in {folder}"))
+        edit = gui.TextEdit()
+        edit.text_value = os.path.join(folder, default_name) if default_name else folder + os.sep
+        edit.tooltip = "an absolute path, ~/..., or a path relative to the folder above"
+        box.add_child(edit)
+        self.save_as_edit = edit  # (test hooks type into it)
+
+        def save() -> None:
             try:
-                on_done(path)
-            except Exception as e:  # reported to the user; the session stays usable
+                path = resolve_typed_path(edit.text_value, folder)
+            except InputError as e:
                 self.show_error(title, e)
+                return
+            self._run_chosen(title, on_done, path)
 
-        dlg.set_on_cancel(self.window.close_dialog)
-        dlg.set_on_done(done)
-        self.window.show_dialog(dlg)
+        def browse() -> None:
+            self.close_dialog()
+            self._browse(gui.FileDialog.SAVE, title, filters, on_done)
+
+        row = gui.Horiz(0.5 * em)
+        for label, cb in (("Browse...", browse), ("Cancel", self.close_dialog), ("Save", save)):
+            b = gui.Button(label)
+            b.set_on_clicked(cb)
+            row.add_child(b)
+        box.add_child(row)
+        dlg.add_child(box)
+        self._save_as_ok = save  # (test hooks press Save)
+        self.show_dialog(dlg)
 
     # -- view changes and rendering -----------------------------------------------------
     def view_changed(self) -> None:
-        """The view changed: ask for a preview now; the tick asks for the full frame once it rests."""
-        self.scheduler.changed(time.monotonic())
+        """The view changed: ask for a preview now (interrupting a full render in progress); the tick asks
+        for the full frame once it rests (:class:`~app.viewer.render_state.RenderStateMachine`)."""
+        change = self.scheduler.changed(time.monotonic())
+        if change.interrupt:
+            self.worker.interrupt_render()
         self.request_render(preview=True)
 
     def request_render(self, preview: bool, camera=None) -> None:
-        """Ask the worker for a frame of the view (or of ``camera``): a preview or the full frame."""
+        """Ask the worker for a frame of the view (or of ``camera``): a preview or the full frame.
+
+        The view's full frame carries a cancel event: any newer request stops it between stages (a
+        full-quality frame of a ``camera`` -- the keyframe preview -- does not)."""
         info = self.state.photo_info
         if info is None or self._display_hw == (0, 0):
             return
@@ -308,15 +430,23 @@ class ViewerWindow:
         display = self._display_hw
         size = frame_size(info.size, min(self._preview_side, max(display))) if preview else display
         stylized = shows_stylized(self.state)
+        split = self.state.split if self.state.compare else None
         version = self.scheduler.version
         session = self.session
+        cancel = None if preview or camera is not None else threading.Event()
+        stop = None if cancel is None else cancel.is_set
 
         def render() -> ViewFrame:
-            return session.render_view(cam, size, display, preview=preview, stylized=stylized)
+            return session.render_view(cam, size, display, preview=preview, stylized=stylized, should_stop=stop,
+                                       split=split)
+
+        def interrupted() -> None:
+            self._post(lambda: self.scheduler.full_interrupted(version))
 
         gen = self.worker.request_render(
             render, lambda res: self._post(lambda: self._on_frame(res, version)), preview=preview,
-            on_error=lambda name, e: self._post(lambda: self._on_render_failed(name, e, version, preview)))
+            on_error=lambda name, e: self._post(lambda: self._on_render_failed(name, e, version, preview)),
+            cancel=cancel, on_interrupted=None if cancel is None else interrupted)
         self._requested_at[gen] = time.perf_counter()
         if not preview and camera is None:
             self.scheduler.full_requested()
@@ -330,6 +460,7 @@ class ViewerWindow:
         self.window.post_redraw()
         self._shown = frame
         self.scheduler.shown(version, res.preview)
+        self.paths.frame_shown()
         now = time.perf_counter()
         latency = now - self._requested_at.pop(res.generation, now)
         for g in [g for g in self._requested_at if g < res.generation]:
@@ -343,6 +474,7 @@ class ViewerWindow:
             self._preview_side = adapt_preview_long_side(self._preview_side, res.seconds, self.preview)
         else:
             st["full_seconds"].append(res.seconds)
+            st["full_shown"].append(time.monotonic())
             st["full_latency"].append(latency)
         for value in st.values():
             if isinstance(value, list):
@@ -360,6 +492,7 @@ class ViewerWindow:
         self.panel.fps_label.text = text
 
     def _on_render_failed(self, name: str, e: BaseException, version: int, preview: bool) -> None:
+        self.paths.frame_shown()
         if not preview:
             self.scheduler.full_failed(version)
         self.show_error(name, e)
@@ -369,9 +502,12 @@ class ViewerWindow:
         if self._closing:
             return False
         now = time.monotonic()
+        if self._close_pending is not None and now - self._close_pending >= CLOSE_GRACE_S:
+            self._close_pending = None  # no Esc followed: the user closed the window
+            self.quit()
         if self.state.playback is not None:
             self.paths.step(now)
-        elif self.state.photo_info is not None and self.scheduler.full_due(now):
+        elif self.state.photo_info is not None and self.scheduler.full_due(now, holding=self._drag is not None):
             self.request_render(preview=False)
         return False
 
@@ -389,6 +525,7 @@ class ViewerWindow:
                 self.reset_view()
                 return gui.Widget.EventCallbackResult.CONSUMED
             self._last_click = (now, e.x, e.y)
+            self.stats["mouse_down"].append(now)
             pan = (e.is_button_down(gui.MouseButton.RIGHT) or e.is_button_down(gui.MouseButton.MIDDLE)
                    or e.is_modifier_down(gui.KeyModifier.SHIFT))
             self._drag = ["pan" if pan else "orbit", e.x, e.y]
@@ -396,13 +533,14 @@ class ViewerWindow:
         if e.type == T.DRAG and self._drag is not None:
             mode, x0, y0 = self._drag
             self._drag[1:] = [e.x, e.y]
+            self.stats["drag_moves"].append(time.monotonic())
             self.drag(mode, e.x - x0, e.y - y0)
             return gui.Widget.EventCallbackResult.CONSUMED
         if e.type == T.BUTTON_UP:
             self._drag = None
             return gui.Widget.EventCallbackResult.CONSUMED
         if e.type == T.WHEEL:
-            self.wheel(-float(e.wheel_dy))
+            self.wheel(wheel_ticks(e.wheel_dy, self.options.invert_wheel))
             return gui.Widget.EventCallbackResult.CONSUMED
         return gui.Widget.EventCallbackResult.IGNORED
 
@@ -434,6 +572,7 @@ class ViewerWindow:
         self.state = replace(self.state, pose=HOME, view_fov=None)
         if self.state.photo_info is not None:
             self.panel.fov.double_value = self.state.photo_info.fov_y_deg
+            self.panel.fov_label.text = f"Field of view: {self.state.photo_info.fov_y_deg:.1f} degrees"
         self.view_changed()
 
     @ui_callback
@@ -443,36 +582,65 @@ class ViewerWindow:
     @ui_callback
     def _on_fov(self, value: float) -> None:
         self.state = replace(self.state, view_fov=float(value))
+        self.panel.fov_label.text = f"Field of view: {float(value):.1f} degrees"
         self.view_changed()
 
     @ui_callback
     def _on_window_key(self, e: gui.KeyEvent) -> bool:
-        """Window-wide keys: F1 only (letters would fire while the user types in a field or a file dialog)."""
-        if e.type == gui.KeyEvent.Type.DOWN and e.key == gui.KeyName.F1:
+        """Window-wide keys, from launch (no click in the view needed): Esc, F1, Ctrl+Q, and the letter
+        shortcuts while no dialog is open (a dialog's text field takes letters). The panel has only number
+        fields, which ignore letters."""
+        K = gui.KeyName
+        if e.key in (K.LEFT_CONTROL, K.RIGHT_CONTROL):
+            self._ctrl_down = e.type == gui.KeyEvent.Type.DOWN
+            return False
+        if e.key == K.ESCAPE:  # never reaches Open3D's default, which closes the window
+            self._close_pending = None  # the close request Open3D made of this key (it makes one on down and up)
+            if e.type == gui.KeyEvent.Type.DOWN:
+                self._on_escape()
+            return True
+        if e.type != gui.KeyEvent.Type.DOWN:
+            return False
+        if e.key == K.F1:
             self._on_help()
             return True
-        return False
+        if e.key == K.Q and self._ctrl_down:
+            self.quit()
+            return True
+        if self._dialog_open:
+            return False
+        action = self._letter_actions().get(e.key)
+        if action is None:
+            return False
+        action()
+        return True
+
+    def _letter_actions(self) -> Dict[Any, Callable[[], None]]:
+        K = gui.KeyName
+        ph, cp, ex = self.photos, self.paths, self.exports
+        return {
+            K.O: ph.on_open_photo, K.S: ph.on_open_style, K.D: ph.on_open_depth, K.M: ph.load_sample,
+            K.T: self._on_stylized_menu, K.R: self.reset_view, K.C: cp.toggle_preview, K.E: ex.on_export,
+            K.P: ex.on_screenshot, K.H: self._on_help, K.K: cp.add_keyframe,
+            K.LEFT_BRACKET: lambda: self.set_strength(self.state.strength - 0.1),
+            K.RIGHT_BRACKET: lambda: self.set_strength(self.state.strength + 0.1),
+        }
 
     @ui_callback
     def _on_view_key(self, e: gui.KeyEvent) -> int:
-        """Shortcuts while the view has the keyboard focus (after a click in it)."""
+        """Keys that number fields also use (arrows, + / -, PgUp / PgDn) act only while the view has the
+        keyboard focus (after a click in it); letters are window-wide (:meth:`_on_window_key`)."""
         ignored, consumed = gui.Widget.EventCallbackResult.IGNORED, gui.Widget.EventCallbackResult.CONSUMED
+        K = gui.KeyName
         if e.type != gui.KeyEvent.Type.DOWN:
             return ignored
-        K = gui.KeyName
-        ph, cp, ex = self.photos, self.paths, self.exports
         actions = {
-            K.O: ph.on_open_photo, K.S: ph.on_open_style, K.D: ph.on_open_depth, K.M: ph.load_sample,
-            K.T: self._on_stylized_menu, K.R: self.reset_view, K.C: cp.toggle_preview, K.E: ex.on_export,
-            K.P: ex.on_screenshot, K.H: self._on_help, K.ESCAPE: self._on_escape,
             K.LEFT: lambda: self._nudge(-1, 0), K.RIGHT: lambda: self._nudge(1, 0),
             K.UP: lambda: self._nudge(0, 1), K.DOWN: lambda: self._nudge(0, -1),
             K.PLUS: lambda: self.wheel(1), K.EQUALS: lambda: self.wheel(1), K.MINUS: lambda: self.wheel(-1),
             K.PAGE_UP: lambda: self.wheel(1), K.PAGE_DOWN: lambda: self.wheel(-1),
-            K.LEFT_BRACKET: lambda: self.set_strength(self.state.strength - 0.1),
-            K.RIGHT_BRACKET: lambda: self.set_strength(self.state.strength + 0.1),
         }
-        action = actions.get(e.key)
+        action = actions.get(e.key) or self._letter_actions().get(e.key)
         if action is None:
             return ignored
         action()
@@ -500,8 +668,24 @@ class ViewerWindow:
         self.panel.stylized.is_on = on
         if self.app.menubar is not None:
             self.app.menubar.set_checked(P.MENU_STYLIZED, on)
-        if on and not self.state.stylize_available:
+        if on and not self.state.stylize_available and self.session.checkpoint_path() is None:
             self.set_status(NO_MODEL)
+        self.view_changed()
+
+    @ui_callback
+    def _on_compare(self, checked: bool) -> None:
+        self.set_compare(bool(checked), self.state.split)
+
+    @ui_callback
+    def _on_split(self, value: float) -> None:
+        self.set_compare(True, float(value))
+
+    def set_compare(self, on: bool, split: float) -> None:
+        """Before / after: the original 3D photo left of ``split`` (a fraction of the width), stylized right."""
+        self.state = replace(self.state, compare=on, split=float(min(1.0, max(0.0, split))))
+        self.panel.compare.checked = on
+        if abs(self.panel.split.double_value - self.state.split) > 1e-9:
+            self.panel.split.double_value = self.state.split
         self.view_changed()
 
     @ui_callback
@@ -510,12 +694,20 @@ class ViewerWindow:
 
     def set_strength(self, value: float) -> None:
         """Style strength in [0, 1] (a re-blend on the worker, then a new frame)."""
+        a = self.set_blend("strength", self.panel.strength, value, self.session.set_strength)
+        self.panel.strength_label.text = f"Style strength: {a:.2f}"
+
+    def set_blend(self, field: str, slider: gui.Slider, value: float, apply: Callable[[float], Any]) -> float:
+        """Set ``state.<field>`` (strength, mix) to ``value`` clamped to [0, 1], show it on ``slider``,
+        run ``apply(value)`` on the worker (a cheap re-blend; a newer one replaces a waiting one) and ask
+        for a new frame. Returns the value."""
         a = float(min(1.0, max(0.0, value)))
-        self.state = replace(self.state, strength=a)
-        if abs(self.panel.strength.double_value - a) > 1e-9:
-            self.panel.strength.double_value = a
-        self.worker.submit("strength", lambda: self.session.set_strength(a), key="strength")
+        self.state = replace(self.state, **{field: a})
+        if abs(slider.double_value - a) > 1e-9:
+            slider.double_value = a
+        self.worker.submit(field, lambda: apply(a), key=field)
         self.view_changed()
+        return a
 
     # -- help, about, quit ---------------------------------------------------------------
     @ui_callback
@@ -525,20 +717,42 @@ class ViewerWindow:
 
     @ui_callback
     def _on_about(self) -> None:
-        self.window.show_message_box(
+        self.show_message(
             "About stylize3d", "Stylized 3D photos from one photo and one style image "
             "(3D Photo Stylization, Mu et al., CVPR 2022). Drag to look around; export videos from the File menu.")
 
     @ui_callback
     def _on_escape(self) -> None:
-        if self.panel.help.visible:
+        """Esc cancels or hides, never quits: the open dialog, else the help, else the drag or the path
+        preview. A running export goes on (its Cancel button stops it)."""
+        if self._dialog_open:
+            self.close_dialog()
+        elif self.panel.help.visible:
             self._on_help()
-        else:
-            self.exports.on_cancel()
+        elif self._drag is not None:
+            self._drag = None
+        elif self.state.playback is not None:
+            self.paths.stop()
+        elif self.exports.exporting:
+            self.set_status("The export goes on; press Cancel to stop it")
 
     @ui_callback
     def _on_quit(self) -> None:
-        self.request_close()
+        self.quit()
+
+    def quit(self) -> None:
+        """Quit (window close, Ctrl+Q, File > Quit): at once, or after asking when an export is running."""
+        if self._closing:
+            return
+        if not self.exports.exporting:
+            self.request_close()
+            return
+        if self._dialog_open:
+            self.close_dialog()
+        self.show_message(
+            "Quit during an export?",
+            "An export is running. Quitting now cancels it and writes nothing.",
+            [("Keep exporting", None), ("Cancel the export and quit", self.request_close)])
 
     def is_settled(self) -> bool:
         """True when the full frame of the current view is on screen and no work is left (test hooks)."""
@@ -547,9 +761,13 @@ class ViewerWindow:
 
     # -- closing ---------------------------------------------------------------------------
     def _on_close(self) -> bool:
+        """A close request (the window's close button, or Esc: Open3D makes one of that key's down and up,
+        just before the key event). It is decided on the tick, :data:`CLOSE_GRACE_S` later, once it is
+        known whether an Esc key event followed."""
         if self._shutdown_done:
             return True
-        self.request_close()
+        if not self._closing and self._close_pending is None:
+            self._close_pending = time.monotonic()
         return False
 
     def request_close(self) -> None:

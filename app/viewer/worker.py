@@ -13,6 +13,14 @@ Two kinds of work reach :class:`ComputeWorker`:
   shows the new strength). A long task may call :meth:`ComputeWorker.serve_pending_render`
   between its steps (an export, between frames), so the view stays live.
 
+A render may carry a *cancel* event (``request_render(..., cancel=)``): when a
+newer request arrives while it runs, the worker sets it, and a render that
+checks it between its stages stops with
+:class:`~stylize3d_core.errors.RenderInterrupted`; the worker then reports it to
+``on_interrupted`` (not as an error) and picks the newer request at once. The
+viewer gives full-quality frames a cancel event, so a new drag never waits for
+the full frame of the last rest.
+
 A finished render is delivered when :func:`should_deliver` says so: the newest
 request always, an older preview only if nothing newer is on screen (so a
 continuous drag shows frames), an older full frame never (the camera has moved on).
@@ -29,6 +37,8 @@ import traceback
 from collections import deque
 from dataclasses import dataclass
 from typing import Any, Callable, Deque, Generic, Optional, TypeVar
+
+from stylize3d_core.errors import RenderInterrupted
 
 T = TypeVar("T")
 
@@ -78,6 +88,8 @@ class _Render:
     on_error: Optional[ErrorCallback]
     preview: bool
     after_task: int  # tasks with seq < after_task must have run first
+    cancel: Optional[threading.Event] = None  # set when a newer request arrives while this one runs
+    on_interrupted: Optional[Callable[[], None]] = None
 
 
 class ComputeWorker:
@@ -102,6 +114,8 @@ class ComputeWorker:
         self._on_error = on_error
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._in_task = False
+        self._running: Optional[_Render] = None
+        self._interrupted = 0
 
     # -- any thread ---------------------------------------------------------------
     def start(self) -> None:
@@ -149,18 +163,44 @@ class ComputeWorker:
             self._submitted += 1
             self._cv.notify_all()
 
+    @property
+    def interrupted(self) -> int:
+        """How many running renders were stopped through their cancel event."""
+        with self._cv:
+            return self._interrupted
+
     def request_render(self, fn: Callable[[], T], deliver: Callable[[RenderResult[T]], None], *,
-                       preview: bool, on_error: Optional[ErrorCallback] = None) -> int:
-        """Make ``fn`` the newest render (replacing a waiting one); returns its generation."""
+                       preview: bool, on_error: Optional[ErrorCallback] = None,
+                       cancel: Optional[threading.Event] = None,
+                       on_interrupted: Optional[Callable[[], None]] = None) -> int:
+        """Make ``fn`` the newest render (replacing a waiting one); returns its generation.
+
+        A render running now that carries a ``cancel`` event is told to stop (its
+        event is set). ``on_interrupted`` runs (worker thread) if this render is
+        stopped the same way.
+        """
         with self._cv:
             if self._stop:
                 return self._generation
             if self._render is not None:
                 self._dropped += 1
+            running = self._running
+            if running is not None and running.cancel is not None:
+                running.cancel.set()
             self._generation += 1
-            self._render = _Render(self._generation, fn, deliver, on_error, preview, self._submitted)
+            self._render = _Render(self._generation, fn, deliver, on_error, preview, self._submitted,
+                                   cancel, on_interrupted)
             self._cv.notify_all()
             return self._generation
+
+    def interrupt_render(self) -> bool:
+        """Tell the running render to stop, if it carries a cancel event; True if one was told."""
+        with self._cv:
+            running = self._running
+            if running is not None and running.cancel is not None:
+                running.cancel.set()
+                return True
+            return False
 
     def is_idle(self) -> bool:
         """True when nothing runs and nothing waits."""
@@ -240,11 +280,23 @@ class ComputeWorker:
 
     def _run_render(self, job: _Render) -> None:
         t0 = time.perf_counter()
+        with self._cv:
+            self._running = job
         try:
             value = job.fn()
+        except RenderInterrupted:  # asked for: a newer request is waiting
+            with self._cv:
+                self._interrupted += 1
+                self._dropped += 1
+            if job.on_interrupted is not None:
+                job.on_interrupted()
+            return
         except Exception as e:  # reported to the UI; the next render may succeed
             self._report("render", e, job.on_error)
             return
+        finally:
+            with self._cv:
+                self._running = None
         seconds = time.perf_counter() - t0
         with self._cv:
             ok = should_deliver(job.generation, self._generation, self._delivered, job.preview)

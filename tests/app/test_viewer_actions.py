@@ -36,7 +36,8 @@ class FakeWindow:
         self.state = state
         self.worker = FakeWorker()
         self.session = SimpleNamespace(load_photo=lambda spec: ("built", spec))
-        self.panel = SimpleNamespace(preview_path=SimpleNamespace(text="Preview (C)"))
+        self.panel = SimpleNamespace(preview_path=SimpleNamespace(text="Preview (C)"),
+                                     key_preview=SimpleNamespace(text="Preview (full quality)"))
         self.status: List[str] = []
         self.renders: List[Any] = []
         self.changes = 0
@@ -118,3 +119,35 @@ def test_export_needs_a_photo_and_uses_the_one_rule_for_stylized(tmp_path, avail
     (name, fn, on_done, _on_error), = w.worker.tasks
     job = fn()
     assert name == "export" and job.stylized is expected and len(job.cameras) == w.state.export.frames
+
+
+def test_keyframe_edits_are_pure_and_keep_durations_with_their_keyframe():
+    import numpy as np
+
+    from app.viewer import keyframe_edit as KE
+    from stylize3d_core.errors import InputError
+    from stylize3d_core.geometry.camera import Cameras
+
+    def cam(x: float, fov: float = 60.0) -> Cameras:
+        m = np.eye(4)
+        m[0, 3] = x
+        return Cameras.create(m, fov)
+
+    kp = KE.add_keyframe(None, cam(0.0), 1.0)
+    kp = KE.add_keyframe(kp, cam(0.1), 2.0)
+    kp = KE.add_keyframe(kp, cam(0.05), 3.0, after=0)  # inserted after the first
+    xs = [k.cam_to_world[0, 3] for k in kp.keyframes]
+    assert xs == [0.0, 0.05, 0.1] and kp.durations_s == (1.0, 3.0, 2.0)
+    moved = KE.move_keyframe(kp, 2, -5)  # clamped to the start
+    assert [k.cam_to_world[0, 3] for k in moved.keyframes] == [0.1, 0.0, 0.05] and moved.durations_s == (2.0, 1.0, 3.0)
+    assert KE.set_keyframe_fov(kp, 1, 40.0).keyframes[1].fov_y_deg == 40.0
+    assert KE.set_keyframe_duration(kp, 2, 0.5).durations_s == (1.0, 3.0, 0.5)
+    assert KE.set_loop(kp, True).loop and KE.set_loop(None, True) is None
+    assert len(KE.delete_keyframe(kp, 0).keyframes) == 2
+    assert KE.delete_keyframe(KE.add_keyframe(None, cam(0.0)), 0) is None
+    labels = KE.keyframe_labels(KE.set_loop(kp, True))
+    assert len(labels) == 3 and labels[-1].endswith("to the first") and labels[0].startswith("1: fov 60")
+    with pytest.raises(InputError, match="no keyframe 4"):
+        KE.delete_keyframe(kp, 3)
+    with pytest.raises(InputError):
+        KE.set_keyframe_duration(kp, 0, 0.0)

@@ -92,6 +92,17 @@ def read_report(path: Path) -> Dict[str, Any]:
     return json.loads(path.read_text()) if path.exists() else {}
 
 
+def wait_for_step(report_path: Path, op: str, count: int = 1, timeout: float = 120.0) -> Dict[str, Any]:
+    """The report once the viewer has run ``count`` steps ``op`` (polled while the test interacts)."""
+    t_end = time.monotonic() + timeout
+    while time.monotonic() < t_end:
+        rep = read_report(report_path)
+        if sum(s["op"] == op for s in rep.get("steps", [])) >= count:
+            return rep
+        time.sleep(0.05)
+    raise AssertionError(f"the viewer never reached the {op!r} step")
+
+
 def check_ran(code: Optional[int], report: Dict[str, Any]) -> None:
     failed = [s for s in report.get("steps", []) if not s.get("ok")]
     assert code == 0, f"viewer exit code {code} (negative = crashed); failed steps: {failed}"
@@ -150,8 +161,10 @@ def test_open_orbit_export_and_survive_bad_files(display, tmp_path):
     assert orbit["preview_frames"] > 0, "no live preview while dragging"
     pose = step(report, "wheel")["result"]["pose"]
     assert pose["pan_x"] < 0 and pose["dolly"] > 0
-    assert step(report, "wait_idle")["result"]["shown"] == {"stylized": False, "preview": False,
-                                                           "size": list(before.shape[:2])}
+    shown = step(report, "wait_idle")["result"]["shown"]
+    assert shown["stylized"] is False and shown["preview"] is False
+    # the screenshot is at the view's size on screen, at least the full frame's (capped at 768)
+    assert before.shape[1] >= shown["size"][1] and abs(before.shape[0] / before.shape[1] - 400 / 600) < 0.01
     assert step(report, "preview_path")["result"]["frames_shown"] > 0
     assert (tmp_path / "clip.mp4").stat().st_size > 0
     assert "Exported" in step(report, "export")["result"]["status"]
@@ -271,13 +284,7 @@ def test_real_mouse_drag_and_key_press(display, tmp_path):
     ]
 
     def wait_for(report_path: Path, op: str, count: int = 1) -> Dict[str, Any]:
-        t_end = time.monotonic() + 120
-        while time.monotonic() < t_end:
-            rep = read_report(report_path)
-            if sum(s["op"] == op for s in rep.get("steps", [])) >= count:
-                return rep
-            time.sleep(0.1)
-        raise AssertionError(f"the viewer never reached the {op!r} step")
+        return wait_for_step(report_path, op, count)
 
     def interact(report_path: Path) -> None:
         rep = wait_for(report_path, "grab_window")
@@ -309,3 +316,242 @@ def test_real_mouse_drag_and_key_press(display, tmp_path):
     assert yaw > 1.0, f"the mouse drag did not orbit (yaw {yaw})"
     assert np.abs(pixels(tmp_path / "after.png") - pixels(tmp_path / "before.png")).mean() > 5
     assert step(report, "state", 1)["result"]["pose"]["yaw_deg"] == 0.0, "the R key did not reset the view"
+
+
+def _send_close_request(lx, dpy, title: bytes) -> bool:
+    """Send WM_DELETE_WINDOW to the top-level window named ``title`` (what a window manager's close
+    button does); False if no such window."""
+    lx.XDefaultRootWindow.restype = ctypes.c_ulong
+    lx.XDefaultRootWindow.argtypes = [ctypes.c_void_p]
+    lx.XQueryTree.argtypes = [ctypes.c_void_p, ctypes.c_ulong, ctypes.POINTER(ctypes.c_ulong),
+                              ctypes.POINTER(ctypes.c_ulong), ctypes.POINTER(ctypes.POINTER(ctypes.c_ulong)),
+                              ctypes.POINTER(ctypes.c_uint)]
+    lx.XFetchName.argtypes = [ctypes.c_void_p, ctypes.c_ulong, ctypes.POINTER(ctypes.c_char_p)]
+    lx.XInternAtom.restype = ctypes.c_ulong
+    lx.XInternAtom.argtypes = [ctypes.c_void_p, ctypes.c_char_p, ctypes.c_int]
+    lx.XSendEvent.argtypes = [ctypes.c_void_p, ctypes.c_ulong, ctypes.c_int, ctypes.c_long, ctypes.c_void_p]
+
+    class ClientMessage(ctypes.Structure):
+        _fields_ = [("type", ctypes.c_int), ("serial", ctypes.c_ulong), ("send_event", ctypes.c_int),
+                    ("display", ctypes.c_void_p), ("window", ctypes.c_ulong), ("message_type", ctypes.c_ulong),
+                    ("format", ctypes.c_int), ("data", ctypes.c_long * 5), ("pad", ctypes.c_long * 16)]
+
+    root = lx.XDefaultRootWindow(dpy)
+    r, p, n = ctypes.c_ulong(), ctypes.c_ulong(), ctypes.c_uint()
+    children = ctypes.POINTER(ctypes.c_ulong)()
+    lx.XQueryTree(dpy, root, ctypes.byref(r), ctypes.byref(p), ctypes.byref(children), ctypes.byref(n))
+    for i in range(n.value):
+        name = ctypes.c_char_p()
+        if lx.XFetchName(dpy, children[i], ctypes.byref(name)) and name.value == title:
+            ev = ClientMessage(type=33, send_event=1, display=dpy, window=children[i],
+                               message_type=lx.XInternAtom(dpy, b"WM_PROTOCOLS", 0), format=32)
+            ev.data[0] = lx.XInternAtom(dpy, b"WM_DELETE_WINDOW", 0)
+            lx.XSendEvent(dpy, children[i], 0, 0, ctypes.byref(ev))
+            lx.XFlush(dpy)
+            return True
+    return False
+
+
+def test_real_events_second_drag_shows_frames_esc_and_close_during_export(display, tmp_path, untrained):
+    """With the model's cost (an untrained lite checkpoint): a second drag 0.3 s after the first shows
+    frames while it moves (the first rest's full frame is interrupted); Esc during an export neither quits
+    nor cancels it; closing the window during an export asks first."""
+    libs = _xtest()
+    if libs is None:
+        pytest.skip("libXtst is not installed: cannot send real mouse and key events to Xvfb")
+    lx, lt = libs
+    out = tmp_path / "out"
+    out.mkdir()
+    steps = [
+        {"op": "load_sample"},
+        {"op": "wait_idle", "timeout": 240},
+        {"op": "grab_window", "path": str(tmp_path / "window.png")},
+        {"op": "sleep", "seconds": 6.0},  # the test drags twice now
+        {"op": "wait_idle", "timeout": 120},
+        {"op": "status"},
+        {"op": "set_export", "frames": 24, "size": 128, "fps": 8},
+        {"op": "export", "path": str(out / "clip.mp4"), "wait": False},
+        {"op": "sleep", "seconds": 2.0},  # the test presses Esc now
+        {"op": "status"},
+        {"op": "wait_export", "timeout": 240},
+        {"op": "set_export", "frames": 400, "size": 256, "fps": 30},
+        {"op": "export", "path": str(out / "long.mp4"), "wait": False},
+        {"op": "sleep", "seconds": 2.0},  # the test closes the window now
+        {"op": "status"},
+        {"op": "quit"},
+    ]
+    marks: Dict[str, Any] = {}
+
+    def wait_for(report_path: Path, op: str, count: int = 1) -> Dict[str, Any]:
+        return wait_for_step(report_path, op, count, timeout=240)
+
+    def drag(dpy, x, y, seconds, dx_per_step):
+        lt.XTestFakeMotionEvent(dpy, -1, x, y, 0)
+        lt.XTestFakeButtonEvent(dpy, 1, 1, 0)
+        lx.XFlush(dpy)
+        n = int(seconds / 0.02)
+        for i in range(1, n + 1):
+            time.sleep(0.02)
+            lt.XTestFakeMotionEvent(dpy, -1, x + dx_per_step * i, y, 0)
+            lx.XFlush(dpy)
+        lt.XTestFakeButtonEvent(dpy, 1, 0, 0)
+        lx.XFlush(dpy)
+
+    def interact(report_path: Path) -> None:
+        rep = wait_for(report_path, "grab_window")
+        x0, y0, x1, y1 = step(rep, "grab_window")["result"]["box"]
+        x, y = x0 + (x1 - x0) // 4, (y0 + y1) // 2
+        dpy = lx.XOpenDisplay(display.encode())
+        assert dpy, f"cannot open display {display}"
+        try:
+            drag(dpy, x, y, 1.0, 1)
+            time.sleep(0.3)  # the full frame of this rest is rendering when the second drag starts
+            marks["second_start"] = time.monotonic()
+            drag(dpy, x + 50, y, 1.5, -1)
+            marks["second_end"] = time.monotonic()
+            wait_for(report_path, "export", 1)
+            time.sleep(0.5)
+            esc = lx.XKeysymToKeycode(dpy, lx.XStringToKeysym(b"Escape"))
+            lt.XTestFakeKeyEvent(dpy, esc, 1, 0)
+            lt.XTestFakeKeyEvent(dpy, esc, 0, 0)
+            lx.XFlush(dpy)
+            wait_for(report_path, "export", 2)
+            time.sleep(0.5)
+            marks["close_sent"] = _send_close_request(lx, dpy, b"stylize3d viewer")
+        finally:
+            lx.XCloseDisplay(dpy)
+
+    code, report = run_viewer(display, tmp_path, steps, ["--model", str(untrained)], during=interact)
+    check_ran(code, report)
+    shown = [t for t in report["stats"]["preview_shown"] if marks["second_start"] <= t <= marks["second_end"]]
+    assert len(shown) >= 2, f"the second drag showed {len(shown)} frames while it moved; {marks}, {report['stats']}"
+    moved = step(report, "status", 0)["result"]
+    assert moved["phase"] == "full"
+    esc = step(report, "status", 1)["result"]
+    assert esc["exporting"] and not esc["closing"], f"Esc stopped the export or quit: {esc}"
+    assert "Exported" in step(report, "wait_export")["result"]["status"]
+    assert (out / "clip.mp4").stat().st_size > 0
+    assert marks["close_sent"], "no window to close"
+    asked = step(report, "status", 2)["result"]
+    assert asked["dialog_open"] and asked["exporting"] and not asked["closing"], asked
+    assert not (out / "long.mp4").exists()  # quitting from the script cancelled it: nothing written
+
+
+def test_keyframe_editor_builds_a_path_exports_it_and_round_trips(display, tmp_path):
+    keys = tmp_path / "keys.json"
+    steps = [
+        {"op": "load_sample"},
+        {"op": "wait_idle", "timeout": 120},
+        {"op": "add_keyframe"},
+        {"op": "orbit", "dx": 80, "dy": 0, "steps": 8},
+        {"op": "add_keyframe"},
+        {"op": "orbit", "dx": -40, "dy": 30, "steps": 8},
+        {"op": "wheel", "ticks": 2},
+        {"op": "add_keyframe"},
+        {"op": "edit_keyframe", "index": 0, "seconds": 0.5},
+        {"op": "edit_keyframe", "index": 1, "fov": 45.0, "seconds": 0.25},
+        {"op": "edit_keyframe", "index": 2, "move": -1},
+        {"op": "edit_keyframe", "index": 0, "loop": True},
+        {"op": "set_export", "size": 96, "fps": 8, "format": "gif"},
+        {"op": "preview_keys"},
+        {"op": "export", "path": str(tmp_path / "keys.gif")},
+        {"op": "save_keyframes", "path": str(keys)},
+        {"op": "edit_keyframe", "index": 0, "delete": True},
+        {"op": "load_keyframes", "path": str(keys)},
+        {"op": "edit_keyframe", "index": 0},
+        {"op": "open_section"},
+        {"op": "wait_idle"},
+        {"op": "grab_window", "path": str(tmp_path / "editor.png")},
+        {"op": "save_as", "what": "screenshot", "text": str(tmp_path / "typed.png")},  # an absolute path
+        {"op": "save_as", "what": "screenshot", "text": "relative.png"},  # in the folder used last
+        {"op": "resize", "width": 300, "height": 200},
+        {"op": "quit"},
+    ]
+    code, report = run_viewer(display, tmp_path, steps, ["--no-model"])
+    check_ran(code, report)
+    assert step(report, "add_keyframe", 2)["result"]["keyframes"] == 3
+    looped = step(report, "edit_keyframe", 3)["result"]
+    assert looped["loop"] and looped["use_keyframes"] and looped["durations_s"] == [0.5, 2.0, 0.25]
+    assert step(report, "preview_keys")["result"]["full_frames_shown"] > 0
+    # 0.5 + 2.0 + 0.25 s of loop at 8 fps: 22 frames in the GIF.
+    with Image.open(tmp_path / "keys.gif") as gif:
+        assert gif.n_frames > 1
+    doc = json.loads(keys.read_text())
+    assert doc["format"] == "stylize3d-camera-path" and len(doc["frames"]) == 3
+    assert doc["keyframes"] == {"durations_s": [0.5, 2.0, 0.25], "loop": True}
+    assert step(report, "edit_keyframe", 5)["result"]["keyframes"] == 3  # loaded back after a delete
+    assert (tmp_path / "typed.png").is_file() and (tmp_path / "relative.png").is_file()
+    shot = Image.open(tmp_path / "typed.png")
+    assert shot.width > 768, f"the screenshot is not at the view's size: {shot.size}"  # the view is ~944 px wide
+    size = step(report, "resize")["result"]
+    assert size["width"] >= 640 and size["height"] >= 480, f"no minimum window size: {size}"
+
+
+def test_style_strip_mix_and_before_after(display, tmp_path, untrained):
+    shots = {n: str(tmp_path / f"{n}.png") for n in ("first", "strip", "mixed", "split")}
+    steps = [
+        {"op": "load_sample"},
+        {"op": "wait_idle", "timeout": 240},
+        {"op": "screenshot", "path": shots["first"]},
+        {"op": "style_strip", "index": 0},
+        {"op": "wait_idle", "timeout": 120},
+        {"op": "screenshot", "path": shots["strip"]},
+        {"op": "mix", "path": str(OTHER_STYLE), "value": 0.5},
+        {"op": "wait_idle", "timeout": 120},
+        {"op": "screenshot", "path": shots["mixed"]},
+        {"op": "compare", "split": 0.5},
+        {"op": "wait_idle", "timeout": 120},
+        {"op": "grab_window", "path": str(tmp_path / "window.png")},
+        {"op": "state"},
+        {"op": "quit"},
+    ]
+    code, report = run_viewer(display, tmp_path, steps, ["--model", str(untrained)])
+    check_ran(code, report)
+    strip = step(report, "style_strip")["result"]
+    assert len(strip["strip"]) >= 4 and strip["style"] != ""  # the bundled styles
+    first, chosen, mixed = (pixels(Path(shots[n])) for n in ("first", "strip", "mixed"))
+    assert np.any(first != chosen), "clicking a thumbnail did not change the style"
+    assert np.any(mixed != chosen), "mixing in a second style did not change the view"
+    state = step(report, "state")["result"]
+    assert state["mix"] == 0.5 and state["compare"] is True and state["style2"].endswith(OTHER_STYLE.name)
+    window = pixels(tmp_path / "window.png")
+    assert window.std() > 20
+
+
+def test_real_wheel_up_moves_forwards(display, tmp_path):
+    libs = _xtest()
+    if libs is None:
+        pytest.skip("libXtst is not installed: cannot send real wheel events to Xvfb")
+    lx, lt = libs
+    steps = [
+        {"op": "load_sample"},
+        {"op": "wait_idle", "timeout": 120},
+        {"op": "grab_window", "path": str(tmp_path / "window.png")},
+        {"op": "sleep", "seconds": 3.0},  # the test turns the wheel up now
+        {"op": "state"},
+        {"op": "quit"},
+    ]
+
+    def interact(report_path: Path) -> None:
+        rep = wait_for_step(report_path, "grab_window")
+        x0, y0, x1, y1 = step(rep, "grab_window")["result"]["box"]
+        x, y = x0 + (x1 - x0) // 3, (y0 + y1) // 2
+        dpy = lx.XOpenDisplay(display.encode())
+        try:
+            lt.XTestFakeMotionEvent(dpy, -1, x, y, 0)
+            lx.XFlush(dpy)
+            time.sleep(0.3)
+            for i in range(3):  # X button 4 is wheel up
+                lt.XTestFakeButtonEvent(dpy, 4, 1, 0)
+                lt.XTestFakeButtonEvent(dpy, 4, 0, 0)
+                lx.XFlush(dpy)
+                time.sleep(0.2)
+                lt.XTestFakeMotionEvent(dpy, -1, x + i + 1, y, 0)  # Open3D hands the wheel over with the next event
+                lx.XFlush(dpy)
+                time.sleep(0.1)
+        finally:
+            lx.XCloseDisplay(dpy)
+
+    code, report = run_viewer(display, tmp_path, steps, ["--no-model"], during=interact)
+    check_ran(code, report)
+    assert step(report, "state")["result"]["pose"]["dolly"] > 0, "wheel up did not move forwards"

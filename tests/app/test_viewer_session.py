@@ -170,3 +170,37 @@ def test_display_image_and_open3d_handoff():
     # The hand-off to the window: an o3d.geometry.Image holding the same pixels.
     img = o3d.geometry.Image(big)
     np.testing.assert_array_equal(np.asarray(img), big)
+
+
+def test_split_view_puts_before_left_and_after_right():
+    import numpy as np
+
+    from app.viewer.session import split_view
+
+    before, after = np.zeros((4, 10, 3), np.float32), np.ones((4, 10, 3), np.float32) * 0.5
+    out = split_view(before, after, 0.3)
+    assert (out[:, :3] == 0).all() and (out[:, 4:] == 0.5).all() and (out[:, 3] == 0.9).all()
+    assert (split_view(before, after, 0.0) == after).all() and (split_view(before, after, 1.0) == before).all()
+    import pytest
+
+    from stylize3d_core.errors import InputError
+
+    with pytest.raises(InputError, match="shapes"):
+        split_view(before, after[:, :5], 0.5)
+
+
+def test_previews_are_colour_matched_to_the_full_frame(untrained):
+    s = ViewerSession(model=str(untrained))
+    s.load_photo(PhotoSpec(str(SAMPLE_PHOTO), "prior", max_size=MAX_SIZE))
+    s.prepare_stylized()
+    s.load_style(str(SAMPLE_STYLE))
+    cam = pose_camera(OrbitPose(yaw_deg=2.0), s.info.scene, s.info.fov_y_deg)
+    full_hw, prev_hw = frame_size(s.info.size, 160), frame_size(s.info.size, 48)
+    before = s.render_view(cam, prev_hw, full_hw, preview=True, stylized=True).image.astype(np.float32)
+    assert s.colour_gain is None
+    full = s.render_view(cam, full_hw, full_hw, preview=False, stylized=True).image.astype(np.float32)
+    assert s.colour_gain is not None and s.colour_gain.shape == (3,)
+    after = s.render_view(cam, prev_hw, full_hw, preview=True, stylized=True).image.astype(np.float32)
+    jump_before = np.abs(before.mean((0, 1)) - full.mean((0, 1))).mean()
+    jump_after = np.abs(after.mean((0, 1)) - full.mean((0, 1))).mean()
+    assert jump_after <= jump_before + 1e-6 and jump_after < 1.0, (jump_before, jump_after)

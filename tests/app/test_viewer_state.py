@@ -9,7 +9,7 @@ import torch
 
 from app.viewer.orbit import HOME, OrbitPose, OrbitScene, cam_to_world
 from app.viewer.state import (
-    VIEWER_MAX_SIZE, ExportSettings, FrameScheduler, PhotoInfo, Playback, PreviewSettings, ViewState,
+    VIEWER_MAX_SIZE, ExportSettings, PhotoInfo, Playback, PreviewSettings, ViewState,
     adapt_preview_long_side, clamp_state_pose, export_destination, fov_range, full_frame_size, playback_frame,
     shows_stylized, trajectory_cameras, user_choices, view_camera, view_fov,
 )
@@ -94,28 +94,6 @@ def test_preview_size_adapts_to_the_time_budget():
         PreviewSettings(preview_long_side=50, min_preview_long_side=96)
 
 
-def test_scheduler_preview_then_full_after_rest():
-    s = FrameScheduler(rest_delay_s=0.15)
-    assert s.version == 0
-    v = s.changed(10.0)
-    assert v == 1 and not s.full_due(10.1) and s.full_due(10.15)
-    s.changed(10.12)  # still moving: the rest timer restarts
-    assert not s.full_due(10.2) and s.full_due(10.3)
-    s.full_requested()
-    assert not s.full_due(11.0) and not s.settled
-    s.shown(s.version, preview=True)
-    assert not s.settled
-    s.shown(s.version, preview=False)
-    assert s.settled
-    s.changed(12.0)
-    assert not s.settled and s.full_due(12.2)
-    s.full_requested()
-    s.shown(s.version - 1, preview=False)  # an old full frame does not settle the new view
-    assert not s.settled
-    s.full_failed(s.version)
-    assert s.settled and not s.full_due(13.0)
-
-
 def test_export_destination():
     assert export_destination("out.mp4", "mp4") == "out.mp4"
     assert export_destination("out", "mp4") == "out.mp4"
@@ -178,3 +156,43 @@ def test_user_choices_leave_out_what_was_loaded():
     c = user_choices(s)
     assert c.photo_info is None and c.playback is None and c.loaded_path is None
     assert c.stylize_available and c.spec == s.spec and c.pose == s.pose
+
+
+def test_wheel_up_moves_forwards_unless_inverted():
+    from app.viewer.state import wheel_ticks
+
+    assert wheel_ticks(1.0) == 1.0 and wheel_ticks(-2.0) == -2.0
+    assert wheel_ticks(1.0, invert=True) == -1.0
+
+
+def test_export_progress_text_estimates_the_time_left():
+    from app.viewer.state import export_progress_text
+
+    assert export_progress_text(0, 90, 0.4) == "Exporting 0/90 frames, 0:00 elapsed"
+    assert export_progress_text(10, 90, 20.0) == "Exporting 10/90 frames, 0:20 elapsed, about 2:40 left"
+    assert export_progress_text(90, 90, 75.0) == "Exporting 90/90 frames, 1:15 elapsed"
+
+
+def test_typed_paths_absolute_home_and_relative(tmp_path):
+    import os
+
+    from app.viewer.state import resolve_typed_path
+
+    assert resolve_typed_path("/tmp/x.mp4", str(tmp_path)) == "/tmp/x.mp4"
+    assert resolve_typed_path("  clips/x.mp4 ", str(tmp_path)) == str(tmp_path / "clips" / "x.mp4")
+    assert resolve_typed_path("../y.png", str(tmp_path / "a")) == str(tmp_path / "y.png")
+    assert resolve_typed_path("~/z.json", None) == os.path.join(os.path.expanduser("~"), "z.json")
+    assert resolve_typed_path("frames/", str(tmp_path)).endswith("/frames/")
+    with pytest.raises(InputError, match="file name"):
+        resolve_typed_path("   ", None)
+
+
+def test_recent_files_most_recent_first_without_duplicates():
+    from app.viewer.state import push_recent
+
+    r = ()
+    for p in ("a.jpg", "b.jpg", "a.jpg", "c.jpg"):
+        r = push_recent(r, p, limit=2 if p == "c.jpg" else 8)
+    assert r == ("c.jpg", "a.jpg")
+    with pytest.raises(InputError):
+        ViewState(mix=1.5)

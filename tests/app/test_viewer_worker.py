@@ -160,3 +160,47 @@ def test_stop_drops_waiting_work_and_refuses_new_work():
     w.submit("after stop", lambda: ran.append("after"))
     assert w.request_render(lambda: ran.append("r"), lambda r: None, preview=True) == 0
     assert ran == [] and not w.thread.is_alive()
+
+
+def test_a_newer_request_stops_a_running_full_render_between_stages(worker):
+    from stylize3d_core.errors import RenderInterrupted
+
+    stages: List[int] = []
+    in_render = threading.Event()
+    cancel = threading.Event()
+    interrupted = threading.Event()
+    delivered: List[str] = []
+
+    def full():
+        for i in range(1000):
+            if cancel.is_set():
+                raise RenderInterrupted("stopped")
+            stages.append(i)
+            in_render.set()
+            cancel.wait(0.01)
+        return "full"
+
+    worker.request_render(full, lambda r: delivered.append(r.value), preview=False, cancel=cancel,
+                          on_interrupted=interrupted.set)
+    assert in_render.wait(TIMEOUT)
+    worker.request_render(lambda: "preview", lambda r: delivered.append(r.value), preview=True)
+    assert interrupted.wait(TIMEOUT)
+    wait_idle(worker)
+    assert cancel.is_set() and len(stages) < 1000
+    assert delivered == ["preview"] and worker.interrupted == 1 and worker.errors == []
+
+
+def test_interrupt_render_only_stops_renders_that_carry_a_cancel_event(worker):
+    assert not worker.interrupt_render()  # nothing runs
+    in_render, go_on = threading.Event(), threading.Event()
+
+    def preview():
+        in_render.set()
+        assert go_on.wait(TIMEOUT)
+        return 1
+
+    worker.request_render(preview, lambda r: None, preview=True)
+    assert in_render.wait(TIMEOUT)
+    assert not worker.interrupt_render()
+    go_on.set()
+    wait_idle(worker)

@@ -1,0 +1,60 @@
+"""The live view's render state machine (app/viewer/render_state.py): moving preview, resting preview, full."""
+
+from __future__ import annotations
+
+from app.viewer.render_state import RenderPhase, RenderStateMachine
+
+
+def test_preview_while_moving_then_full_after_rest():
+    s = RenderStateMachine(rest_delay_s=0.15)
+    assert s.version == 0 and s.phase is RenderPhase.SETTLED
+    c = s.changed(10.0)
+    assert c.version == 1 and not c.interrupt and s.phase is RenderPhase.MOVING
+    assert not s.full_due(10.1) and s.full_due(10.15)
+    s.changed(10.12)  # still moving: the rest timer restarts
+    assert not s.full_due(10.2) and s.full_due(10.3)
+    s.full_requested()
+    assert s.phase is RenderPhase.RESTING and s.rendering_full
+    assert not s.full_due(11.0) and not s.settled
+    s.shown(s.version, preview=True)  # a late preview keeps it resting
+    assert s.phase is RenderPhase.RESTING
+    s.shown(s.version, preview=False)
+    assert s.settled and s.phase is RenderPhase.SETTLED and not s.full_due(20.0)
+
+
+def test_a_change_while_the_full_frame_renders_interrupts_it():
+    s = RenderStateMachine(rest_delay_s=0.15)
+    s.changed(0.0)
+    s.full_requested()
+    assert s.phase is RenderPhase.RESTING
+    c = s.changed(1.0)  # a second drag starts while the first rest's full frame renders
+    assert c.interrupt and c.version == 2 and s.phase is RenderPhase.MOVING
+    s.shown(1, preview=False)  # the old full frame (if it still finished) does not settle the new view
+    assert not s.settled
+    assert not s.changed(1.05).interrupt  # moving: nothing to interrupt
+    assert s.full_due(1.3)
+    s.full_requested()
+    s.full_interrupted(s.version - 1)  # about an old version: ignored
+    assert s.phase is RenderPhase.RESTING
+    s.full_interrupted(s.version)  # abandoned without a change: rest again, re-request
+    assert s.phase is RenderPhase.MOVING and s.full_due(1.4)
+
+
+def test_a_failed_full_frame_settles_until_the_next_change():
+    s = RenderStateMachine(rest_delay_s=0.0)
+    s.changed(5.0)
+    assert s.full_due(5.0)
+    s.full_requested()
+    s.full_failed(s.version - 1)
+    assert not s.settled
+    s.full_failed(s.version)
+    assert s.settled and not s.full_due(9.0)
+    s.changed(9.0)
+    assert s.full_due(9.0)
+
+
+def test_while_the_button_is_held_the_rest_takes_longer():
+    s = RenderStateMachine(rest_delay_s=0.15, hold_delay_s=0.5)
+    s.changed(0.0)
+    assert s.full_due(0.2) and not s.full_due(0.2, holding=True)  # a pause between two bursts of moves
+    assert s.full_due(0.5, holding=True)
