@@ -4,7 +4,8 @@ For each seed, a random textured scene is ray-cast from three poses (exact
 depth) and a held-out pose (``stylize3d_core/eval/multiview.py``). Prints
 
 (a) PSNR of the held-out view rendered (plain) from the merged cloud and from
-    each view's own 3D photo;
+    each view's own 3D photo, over the whole image and over the pixels some
+    input view saw (``observed_mask``);
 (b) consistency RMSE (``eval/consistency.py``, all ordered pairs of the three
     input poses and the held-out pose, warped through the merged cloud) of
     the plain merged renders, of the stylized merged renders, and of each
@@ -23,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from stylize3d_core.eval.consistency import consistency_metrics
-from stylize3d_core.eval.multiview import held_out_psnr, procedural_views
+from stylize3d_core.eval.multiview import held_out_psnr, observed_mask, procedural_views
 from stylize3d_core.geometry.camera import Cameras
 from stylize3d_core.io.images import load_image
 from stylize3d_core.models.checkpoint import load_checkpoint
@@ -48,6 +49,9 @@ def main() -> None:
         data = procedural_views(seed)
         scores = held_out_psnr(data)
         print(f"seed {seed}: held-out PSNR  " + "  ".join(f"{k} {v:.2f} dB" for k, v in scores.items()))
+        seen = held_out_psnr(data, observed_only=True)
+        print(f"seed {seed}: observed pixels ({observed_mask(data).mean():.1%}) PSNR  "
+              + "  ".join(f"{k} {v:.2f} dB" for k, v in seen.items()))
         merged = merge_views(data.views, 0).photo
         h, w = data.held_out_rgb.shape[:2]
         world = [v.cam_to_world for v in data.views] + [data.held_out_pose]

@@ -11,10 +11,19 @@ the frame of the **centre view** and scaled by the centre view's
 nearest surface is about ``NEAR_DEPTH`` away, so the encoder's NDC is the
 centre view's and the model renders it with no retraining.
 
+**Invented points** (hidden layers, borders) give way to better evidence: a
+view's invented point is dropped where another view's canvas reaches it with a
+shorter extrapolation (:func:`_covered_by`: its photo, i.e. a real observation,
+beats any invented point; a hidden layer, next to what its view saw, beats a
+border; a border pixel fewer pixels outside its photo beats one farther out),
+unless it lies behind that view's surface (which may hide it). So no view's
+invented background covers a surface another view saw, and outside every
+photo the border of the view that extrapolated least is kept.
+
 **Thinning** where views overlap: points are kept in priority order -- the
 centre view's visible points, the other views' visible points, the hidden
-layers, the centre view's border -- and a point is dropped when its cell is
-already taken. Cells are one centre-view pixel by one depth band
+layers, the centre view's border, the other views' borders -- and a point is
+dropped when its cell is already taken. Cells are one centre-view pixel by one depth band
 (``thin_depth`` relative), in the centre camera's (u, v, log z), so a surface
 seen by several views keeps about one point per pixel of the centre view;
 surfaces the centre view does not see (behind its foreground, outside its
@@ -127,19 +136,49 @@ def pose_agreement(xyz: np.ndarray, rgb: np.ndarray, centre: Photo3D, *, depth_t
     return float(same[unoccluded].sum() / max(1, int(unoccluded.sum())))
 
 
-def _seen_by(xyz: np.ndarray, p3d: Photo3D, view: View, centre_view: View, centre_scale: float,
-             depth_tol: float = 0.05) -> np.ndarray:
-    """(N,) bool: points ``xyz`` (centre frame, scene units) that ``view`` sees or sees through (inside its
-    photo and not behind its visible surface)."""
+def _reach(u: np.ndarray, v: np.ndarray, size) -> np.ndarray:
+    """(N,) how far (photo pixels) canvas positions ``(u, v)`` lie outside the photo: 0 inside, the distance
+    to the photo's rectangle in its border (how far its colour and depth were extrapolated)."""
+    h, w = size
+    dx = np.maximum(0.0, np.maximum(-u, u - w))
+    dy = np.maximum(0.0, np.maximum(-v, v - h))
+    return np.hypot(dx, dy)
+
+
+def _own_reach(p3d: Photo3D, label: int) -> np.ndarray:
+    """(N,) extrapolation distance of the points of ``p3d`` with ``label`` (see :func:`_reach`); the hidden
+    layer is invented next to what the view saw: :data:`HIDDEN_REACH`."""
+    sel = p3d.points.label == label
+    if label == INPAINTED:
+        return np.full(int(sel.sum()), HIDDEN_REACH)
+    uvz = _project(p3d.points.xyz[sel].astype(np.float64), p3d.fov_y_deg, p3d.size)
+    return _reach(uvz[:, 0], uvz[:, 1], p3d.size)
+
+
+HIDDEN_REACH = 0.5
+"""Extrapolation distance given to hidden-layer points: more than a view's real surface (0), less than
+any border pixel (>= 0.5 photo pixels outside the frame)."""
+
+
+def _covered_by(xyz: np.ndarray, reach: np.ndarray, p3d: Photo3D, view: View, centre_view: View,
+                centre_scale: float, depth_tol: float = 0.05) -> np.ndarray:
+    """(N,) bool: invented points ``xyz`` (centre frame, scene units; extrapolated ``reach`` pixels) that
+    ``view`` has better evidence for: they land on its canvas where its layer-0 surface is extrapolated less
+    (its photo: real, seen) and lie in front of that surface or on it (``depth_tol``), i.e. the view would
+    have shown them had they been there."""
     T = np.linalg.inv(view.cam_to_world) @ centre_view.cam_to_world  # centre camera -> view camera
     local = ((xyz / centre_scale) @ T[:3, :3].T + T[:3, 3]) * p3d.ldi.depth_scale  # the view's scene frame
     h, w = p3d.size
+    pad = p3d.ldi.pad
     uvz = _project(local, view.fov_y_deg, (h, w))
-    inside = (uvz[:, 2] > 1e-6) & (uvz[:, 0] >= 0) & (uvz[:, 0] < w) & (uvz[:, 1] >= 0) & (uvz[:, 1] < h)
+    u, v = uvz[:, 0] + pad, uvz[:, 1] + pad  # canvas pixels
+    hc, wc = p3d.ldi.canvas_size
+    inside = (uvz[:, 2] > 1e-6) & (u >= 0) & (u < wc) & (v >= 0) & (v < hc)
     out = np.zeros(len(xyz), bool)
-    col, row = uvz[inside, 0].astype(int), uvz[inside, 1].astype(int)
-    surface = p3d.ldi.depth[p3d.ldi.photo_region][row, col]
-    out[inside] = uvz[inside, 2] <= surface * (1 + depth_tol)
+    col, row = u[inside].astype(int), v[inside].astype(int)
+    surface = p3d.ldi.depth[row, col]
+    better = _reach(col - pad + 0.5, row - pad + 0.5, (h, w)) < reach[inside]
+    out[inside] = better & (uvz[inside, 2] <= surface * (1 + depth_tol))
     return out
 
 
@@ -177,6 +216,7 @@ def merge_views(views: Sequence[View], centre: int = 0, settings: Photo3DSetting
     # Priority groups: (view, label) in keeping order.
     order = [(centre, ORIGINAL)] + [(i, ORIGINAL) for i in range(len(views)) if i != centre]
     order += [(centre, INPAINTED)] + [(i, INPAINTED) for i in range(len(views)) if i != centre] + [(centre, BORDER)]
+    order += [(i, BORDER) for i in range(len(views)) if i != centre]
     taken: set = set()
     keep_xyz, keep_rgb, keep_label, keep_view = [], [], [], []
     kept = [0] * len(views)
@@ -189,11 +229,12 @@ def merge_views(views: Sequence[View], centre: int = 0, settings: Photo3DSetting
         rgb = photos[i].points.rgb[sel][ahead]
         if len(pts) == 0:
             continue
-        if label != ORIGINAL:  # invented surface (hidden layer, border): dropped where another view saw the truth
+        if label != ORIGINAL:  # invented surface (hidden layer, border): dropped where another view has better evidence
+            reach = _own_reach(photos[i], label)[ahead]
             for j, (pj, vj) in enumerate(zip(photos, views)):
                 if j != i and len(pts):
-                    unseen = ~_seen_by(pts, pj, vj, views[centre], scale)
-                    pts, rgb = pts[unseen], rgb[unseen]
+                    keep = ~_covered_by(pts, reach, pj, vj, views[centre], scale)
+                    pts, rgb, reach = pts[keep], rgb[keep], reach[keep]
             if len(pts) == 0:
                 continue
         uvz = _project(pts, c.fov_y_deg, c.size)

@@ -9,6 +9,7 @@ from stylize3d_core.eval.multiview import look_pose, procedural_views
 from stylize3d_core.geometry.camera import NEAR_DEPTH
 from stylize3d_core.scene.ldi import ORIGINAL
 from stylize3d_core.scene.multiview import View, merge_views, pose_in_view
+from stylize3d_core.scene.photo3d import Photo3D, Photo3DSettings
 
 
 @pytest.fixture(scope="module")
@@ -64,3 +65,24 @@ def test_pose_in_view_scales_translations():
              look_pose(1.0), 50.0, "a.png")
     T = pose_in_view(look_pose(1.5), v, 2.0)
     assert np.allclose(T[:3, 3], [1.0, 0, 0]) and np.allclose(T[:3, :3], np.eye(3))
+
+
+def test_no_invented_point_hides_what_another_view_saw(data):
+    merged = merge_views(data.views, 0)
+    pts = merged.photo.points
+    invented = pts.label != ORIGINAL
+    assert invented.any()
+    centre = data.views[0]
+    for j, v in enumerate(data.views):
+        single = Photo3D.build(v.rgb, v.depth, Photo3DSettings(fov_y_deg=v.fov_y_deg))
+        mine = invented & (merged.view_of_point != j)
+        T = np.linalg.inv(v.cam_to_world) @ centre.cam_to_world  # centre camera -> view j
+        local = ((pts.xyz[mine] / merged.photo.ldi.depth_scale) @ T[:3, :3].T + T[:3, 3]) * single.ldi.depth_scale
+        h, w = single.size
+        f = (h / 2) / np.tan(np.radians(v.fov_y_deg) / 2)
+        u = local[:, 0] / local[:, 2] * f + w / 2
+        r = local[:, 1] / local[:, 2] * f + h / 2
+        inside = (local[:, 2] > 0) & (u >= 0) & (u < w) & (r >= 0) & (r < h)
+        surface = single.ldi.depth[single.ldi.photo_region][r[inside].astype(int), u[inside].astype(int)]
+        # in view j's photo, an invented point of another view lies behind what view j saw (it may hide there)
+        assert (local[inside, 2] > surface * 1.05).all(), (j, int((local[inside, 2] <= surface * 1.05).sum()))
