@@ -162,7 +162,8 @@ class Stylized3DPhoto:
             if not torch.isfinite(dense.sum()) and not torch.isfinite(dense).all():
                 raise InputError(self._checkpoint_name, "its weights make NaN or infinite features on this photo "
                                  "(the weights are finite but far too large: a diverged or corrupt checkpoint)")
-            self._dense = dense.index_select(0, self._order).contiguous()
+            # float32 whatever the autocast dtype (bfloat16 under torch.autocast): the rasterizer takes float32
+            self._dense = dense.float().index_select(0, self._order).contiguous()
         self.timings["upsample"] = time.perf_counter() - t0
 
     def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False) -> np.ndarray:
@@ -177,7 +178,7 @@ class Stylized3DPhoto:
             keep, ss = n, self.settings.supersample
         with torch.inference_mode():
             rgb, _ = self.model.render_view(self._dense[:keep], self._xyz[:keep], camera, height, width, supersample=ss)
-            rgb = torch.nan_to_num(rgb, nan=0.0).clamp_(0.0, 1.0)
+            rgb = torch.nan_to_num(rgb.float(), nan=0.0).clamp_(0.0, 1.0)  # float32 after a bfloat16 autocast
         return rgb.permute(1, 2, 0).contiguous().numpy()
 
     def frames(self, cameras: Cameras, height: int, width: int) -> Iterator[np.ndarray]:

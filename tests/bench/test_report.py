@@ -1,0 +1,43 @@
+"""Bench tables and plots (stylize3d_core/bench/report.py) and the stress suite's table."""
+
+import json
+
+import cv2
+import pytest
+
+from stylize3d_core.bench.report import pareto_front, scatter_plot, write_table
+from stylize3d_core.bench.suites import run_stress
+from stylize3d_core.errors import InputError
+
+
+def test_pareto_front():
+    # (seconds, quality): lower x and higher y are better
+    pts = [(1.0, 30.0), (2.0, 35.0), (1.5, 29.0), (3.0, 34.0), (0.5, 20.0)]
+    assert pareto_front(pts) == [4, 0, 1]
+    assert pareto_front([(1.0, 1.0)]) == [0]
+
+
+def test_write_table_and_plot(tmp_path):
+    rows = [{"knob": "a|b", "ms": 1.23456, "ok": True}, {"knob": "c", "ms": float("nan"), "ok": False}]
+    md, js = write_table(tmp_path, "t", "Title", rows, notes=["a note"])
+    data = json.loads(js.read_text())
+    assert data["columns"] == ["knob", "ms", "ok"] and data["rows"][1]["ms"] == "nan"
+    assert "load_average" in data["machine"]
+    text = md.read_text()
+    assert "| a\\|b | 1.235 | yes |" in text and "a note" in text
+    with pytest.raises(InputError):
+        write_table(tmp_path, "empty", "Empty", [])
+    png = scatter_plot(tmp_path / "p.png", [(1, 2), (2, 3), (float("nan"), 1)], ["x", "y", "z"], "s", "dB", "T",
+                       front=[0, 1])
+    img = cv2.imread(str(png))
+    assert img is not None and img.shape == (640, 900, 3) and img.min() < 255
+
+
+def test_stress_quick_table(tmp_path):
+    rows = run_stress(tmp_path, quick=True)
+    data = json.loads((tmp_path / "stress.json").read_text())
+    assert [r["case"] for r in data["rows"]] == [r["case"] for r in rows]
+    assert {"case", "category", "expected", "outcome", "pass", "seconds"} <= set(data["columns"])
+    assert all(r["pass"] for r in data["rows"]), [r for r in data["rows"] if not r["pass"]]
+    assert {"error", "image"} <= {r["expected"] for r in data["rows"]}
+    assert "Numerical stress cases" in (tmp_path / "stress.md").read_text()
