@@ -142,7 +142,7 @@ class Stylized3DPhoto:
             t0 = time.perf_counter()
             with torch.inference_mode():
                 maps = self._encoder()(style_tensor(style_rgb)).maps
-                self._stylized = self.model.stylizer.stylize(self._content, maps)  # (M, C)
+                self._stylized = self.model.stylizer.stylize(self._content, maps).float()  # (M, C), float32 after autocast
             self.timings["style"] = time.perf_counter() - t0
         self._dense = None
 

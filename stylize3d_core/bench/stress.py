@@ -220,6 +220,18 @@ def _bfloat16(quick: bool) -> Images:
     return out
 
 
+def _bfloat16_style(quick: bool) -> Images:
+    """The style set under a bfloat16 autocast, the frames rendered in float32 (and the reverse)."""
+    p3d = Photo3D.build(make_photo(), depth_map(step_depth(48, 64, 1.0, 3.0)))
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        s = stylized(p3d)
+    out = [s.render(c, 32, 40) for c in _default_cams()]
+    s.set_strength(0.5)
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        out += [s.render(c, 32, 40) for c in _default_cams()]
+    return out
+
+
 def _cli(args: Dict[str, object], depth: Optional[np.ndarray] = None, expect_status: int = 0) -> Callable[[bool], Images]:
     """``stylize3d render`` through ``app.cli.main`` is an application: the case runs the
     library's pipeline job (``run_render``), which the CLI is a thin layer over."""
@@ -281,6 +293,7 @@ def cases() -> List[StressCase]:
         StressCase("frame 4000 pixels wide", "size", _sizes(24, 32, 8, 4000), stylized=True),
         StressCase("photo 4000 pixels wide", "size", _sizes(16, 4000, 8, 64), stylized=True),
         StressCase("bfloat16 autocast", "dtype", _bfloat16, stylized=True),
+        StressCase("bfloat16 style, float32 frames", "dtype", _bfloat16_style, stylized=True),
         StressCase("job: NaN depth file, fov 150", "pipeline", _cli({"fov": 150.0}, depth=nan)),
         StressCase("job: fov 5, stylized", "pipeline", _cli({"fov": 5.0, "style": "__style__"}), stylized=True),
     ]

@@ -48,3 +48,26 @@ def run_stress(out: Path, quick: bool = False, show_progress: bool = False, log:
                        "cases: stylize3d_core/bench/stress.py" + (" (--quick subset)" if quick else "")])
     log(f"stress: {len(rows) - failed} of {len(rows)} passed")
     return rows
+
+
+def run_suite(name: str, out, quick: bool = False, show_progress: bool = False, log: Log = _quiet,
+              photo: Optional[str] = None, style: Optional[str] = None) -> List[dict]:
+    """Run the suite ``name`` (speed, consistency, scaling, stress, skips) and write its tables to ``out``."""
+    from ..errors import InputError
+
+    if name == "stress":
+        return run_stress(Path(out), quick, show_progress, log)
+    if name in ("speed", "skips"):
+        from .speed import run_skips, run_speed
+
+        fn = run_speed if name == "speed" else run_skips
+        return fn(Path(out), quick, show_progress, log, photo=photo, style=style)
+    if name == "consistency":
+        from .consistency import run_consistency
+
+        return run_consistency(Path(out), quick, show_progress, log, photo=photo, style=style)
+    if name == "scaling":
+        from .scaling import run_scaling
+
+        return run_scaling(Path(out), quick, show_progress, log, photo=photo)
+    raise InputError("suite", f"must be one of speed, consistency, scaling, stress, skips; got {name!r}")
