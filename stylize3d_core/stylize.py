@@ -103,7 +103,7 @@ class Stylized3DPhoto:
             self._geom = prepare_geometry(pts.xyz, pts.rgb, photo.fov_y_deg, photo.size,
                                           self.model.config.neighbourhood, seed=settings.seed)
             t1 = time.perf_counter()
-            self._content = self.model.encode(self._geom)  # (M, C)
+            self._content = self.model.encode(self._geom).float()  # (M, C), float32 even under an autocast
         t2 = time.perf_counter()
         self._order = random_order(self._geom.xyz.shape[0], settings.seed)  # (N,)
         self._xyz = self._geom.xyz.index_select(0, self._order).contiguous()  # (N, 3), random order
