@@ -41,3 +41,16 @@ def test_stress_quick_table(tmp_path):
     assert all(r["pass"] for r in data["rows"]), [r for r in data["rows"] if not r["pass"]]
     assert {"error", "image"} <= {r["expected"] for r in data["rows"]}
     assert "Numerical stress cases" in (tmp_path / "stress.md").read_text()
+
+
+def test_sharpness_and_psnr():
+    import numpy as np
+
+    from stylize3d_core.bench.consistency import sharpness
+    from stylize3d_core.bench.speed import psnr
+
+    flat = np.full((32, 32, 3), 0.5, np.float32)
+    noisy = np.clip(flat + np.random.default_rng(0).normal(0, 0.1, flat.shape), 0, 1).astype(np.float32)
+    assert sharpness(flat) == 0.0 and sharpness(noisy) > 0.1
+    assert psnr(flat, flat) == float("inf")
+    assert abs(psnr(flat, flat + 0.1) - 20.0) < 1e-3
