@@ -41,6 +41,7 @@ class StressCase:
     run: Callable[[bool], Images]
     expect: str = "image"  # "image": finite images in [0, 1]; "error": an InputError
     stylized: bool = False  # needs the shipped model (slower)
+    heavy: bool = False  # large inputs: left out of the --quick subset
 
 
 @dataclass(frozen=True)
@@ -108,6 +109,11 @@ def stylized(p3d: Photo3D, style: Optional[np.ndarray] = None):
     return s
 
 
+def _photo3d(near: float = 1.0, far: float = 3.0, settings: Photo3DSettings = Photo3DSettings()) -> Photo3D:
+    """The 64 x 48 test photo with one depth edge (``near`` square on a ``far`` plane)."""
+    return Photo3D.build(make_photo(), depth_map(step_depth(48, 64, near, far)), settings)
+
+
 def plain_views(p3d: Photo3D, cams: Sequence[Cameras], h: int = 32, w: int = 40) -> Images:
     from ..render.plain import PlainRenderer
 
@@ -137,7 +143,7 @@ def _default_cams() -> List[Cameras]:
 
 def _depth_scale(near: float, far: float) -> Callable[[bool], Images]:
     def run(quick: bool) -> Images:
-        p3d = Photo3D.build(make_photo(), depth_map(step_depth(48, 64, near, far)))
+        p3d = _photo3d(near, far)
         return both_views(p3d, _default_cams())
     return run
 
@@ -172,14 +178,14 @@ def _depth_file(values: str, expect_points: bool = True) -> Callable[[bool], Ima
 
 def _fov(fov: float) -> Callable[[bool], Images]:
     def run(quick: bool) -> Images:
-        p3d = Photo3D.build(make_photo(), depth_map(step_depth(48, 64, 1.0, 4.0)), Photo3DSettings(fov_y_deg=fov))
+        p3d = _photo3d(1.0, 4.0, Photo3DSettings(fov_y_deg=fov))
         return both_views(p3d, [camera(fov=fov), camera(tx=0.05, fov=fov), camera(fov=5.0), camera(fov=150.0)])
     return run
 
 
 def _camera(tz: float, yaw: float = 0.0) -> Callable[[bool], Images]:
     def run(quick: bool) -> Images:
-        p3d = Photo3D.build(make_photo(), depth_map(step_depth(48, 64, 1.0, 4.0)))
+        p3d = _photo3d(1.0, 4.0)
         return both_views(p3d, [camera(tz=tz, yaw_deg=yaw)])
     return run
 
@@ -198,38 +204,52 @@ def _coincident(quick: bool) -> Images:
 
 def _constant_style(value: float) -> Callable[[bool], Images]:
     def run(quick: bool) -> Images:
-        p3d = Photo3D.build(make_photo(), depth_map(step_depth(48, 64, 1.0, 3.0)))
+        p3d = _photo3d()
         s = stylized(p3d, style=np.full((64, 64, 3), value, np.float32))
         return [s.render(c, 32, 40) for c in _default_cams()]
     return run
 
 
-def _sizes(h: int, w: int, fh: int, fw: int) -> Callable[[bool], Images]:
+def _sizes(h: int, w: int, fh: int, fw: int, stylized: bool = True) -> Callable[[bool], Images]:
     def run(quick: bool) -> Images:
         p3d = Photo3D.build(make_photo(h, w), depth_map(step_depth(h, w, 1.0, 3.0)))
-        return both_views(p3d, _default_cams(), fh, fw)
+        return (both_views if stylized else plain_views)(p3d, _default_cams(), fh, fw)
     return run
 
 
-def _bfloat16(quick: bool) -> Images:
-    p3d = Photo3D.build(make_photo(), depth_map(step_depth(48, 64, 1.0, 3.0)))
-    with torch.autocast("cpu", dtype=torch.bfloat16):
-        s = stylized(p3d)
-        out = [s.render(c, 32, 40) for c in _default_cams()]
-        out += [s.render(c, 32, 40, preview=True) for c in _default_cams()]
-    return out
+def _bfloat16(style_only: bool) -> Callable[[bool], Images]:
+    """Everything under a bfloat16 autocast; or (``style_only``) the model and style set under it, the frames
+    rendered in float32 and then under it again at a new strength."""
+    def run(quick: bool) -> Images:
+        p3d = _photo3d()
+        with torch.autocast("cpu", dtype=torch.bfloat16):
+            s = stylized(p3d)
+            out = [] if style_only else [s.render(c, 32, 40, preview=True) for c in _default_cams()]
+        if style_only:
+            out += [s.render(c, 32, 40) for c in _default_cams()]
+            s.set_strength(0.5)
+        with torch.autocast("cpu", dtype=torch.bfloat16):
+            out += [s.render(c, 32, 40) for c in _default_cams()]
+        return out
+    return run
 
 
-def _bfloat16_style(quick: bool) -> Images:
-    """The style set under a bfloat16 autocast, the frames rendered in float32 (and the reverse)."""
-    p3d = Photo3D.build(make_photo(), depth_map(step_depth(48, 64, 1.0, 3.0)))
-    with torch.autocast("cpu", dtype=torch.bfloat16):
-        s = stylized(p3d)
-    out = [s.render(c, 32, 40) for c in _default_cams()]
-    s.set_strength(0.5)
-    with torch.autocast("cpu", dtype=torch.bfloat16):
-        out += [s.render(c, 32, 40) for c in _default_cams()]
-    return out
+def _large_photo_file(quick: bool) -> Images:
+    """A 4000 x 3000 photo file, shrunk by ``PhotoSpec.max_size`` (default 1024) on loading."""
+    from ..io.images import save_image
+    from ..pipeline import PhotoSpec, load_photo3d
+
+    with tempfile.TemporaryDirectory() as tmp:
+        photo = Path(tmp) / "big.jpg"
+        ramp = np.linspace(0, 255, 4000, dtype=np.float32).astype(np.uint8)
+        big = np.empty((3000, 4000, 3), np.uint8)
+        big[..., 0], big[..., 1], big[..., 2] = ramp, ramp[::-1], 128
+        big[1000:2000, 1500:2500] = 40  # a dark square: the prior gives it an edge
+        save_image(photo, big)
+        p3d = load_photo3d(PhotoSpec(photo=str(photo), depth="prior", max_size=256))
+    if p3d.size != (192, 256):
+        raise RuntimeError(f"expected a 256 x 192 photo after shrinking, got {p3d.size}")
+    return plain_views(p3d, _default_cams(), 48, 64)
 
 
 def _cli(args: Dict[str, object], depth: Optional[np.ndarray] = None, expect_status: int = 0) -> Callable[[bool], Images]:
@@ -291,9 +311,10 @@ def cases() -> List[StressCase]:
         StressCase("frame 1 pixel high", "size", _sizes(48, 64, 1, 32), stylized=True),
         StressCase("frame 1 x 1", "size", _sizes(48, 64, 1, 1), stylized=True),
         StressCase("frame 4000 pixels wide", "size", _sizes(24, 32, 8, 4000), stylized=True),
-        StressCase("photo 4000 pixels wide", "size", _sizes(16, 4000, 8, 64), stylized=True),
-        StressCase("bfloat16 autocast", "dtype", _bfloat16, stylized=True),
-        StressCase("bfloat16 style, float32 frames", "dtype", _bfloat16_style, stylized=True),
+        StressCase("photo 4000 pixels wide", "size", _sizes(16, 4000, 8, 64, stylized=False), heavy=True),
+        StressCase("photo file 4000 x 3000, shrunk", "size", _large_photo_file, heavy=True),
+        StressCase("bfloat16 autocast", "dtype", _bfloat16(False), stylized=True),
+        StressCase("bfloat16 style, float32 frames", "dtype", _bfloat16(True), stylized=True),
         StressCase("job: NaN depth file, fov 150", "pipeline", _cli({"fov": 150.0}, depth=nan)),
         StressCase("job: fov 5, stylized", "pipeline", _cli({"fov": 5.0, "style": "__style__"}), stylized=True),
     ]

@@ -39,7 +39,10 @@ def test_bench_skips_quick(tmp_path):
 
 def test_bench_stress_quick(tmp_path):
     assert main(["bench", "stress", "--quick", "-q", "--out", str(tmp_path)]) == 0
-    assert all(r["pass"] for r in _table(tmp_path, "stress")["rows"])
+    data = _table(tmp_path, "stress")
+    assert {"case", "category", "expected", "outcome", "pass", "seconds"} <= set(data["columns"])
+    assert all(r["pass"] for r in data["rows"]), [r for r in data["rows"] if not r["pass"]]
+    assert {"error", "image"} <= {r["expected"] for r in data["rows"]}
 
 
 def test_bench_bad_suite(capsys):

@@ -6,7 +6,6 @@ import cv2
 import pytest
 
 from stylize3d_core.bench.report import pareto_front, scatter_plot, write_table
-from stylize3d_core.bench.suites import run_stress
 from stylize3d_core.errors import InputError
 
 
@@ -31,16 +30,6 @@ def test_write_table_and_plot(tmp_path):
                        front=[0, 1])
     img = cv2.imread(str(png))
     assert img is not None and img.shape == (640, 900, 3) and img.min() < 255
-
-
-def test_stress_quick_table(tmp_path):
-    rows = run_stress(tmp_path, quick=True)
-    data = json.loads((tmp_path / "stress.json").read_text())
-    assert [r["case"] for r in data["rows"]] == [r["case"] for r in rows]
-    assert {"case", "category", "expected", "outcome", "pass", "seconds"} <= set(data["columns"])
-    assert all(r["pass"] for r in data["rows"]), [r for r in data["rows"] if not r["pass"]]
-    assert {"error", "image"} <= {r["expected"] for r in data["rows"]}
-    assert "Numerical stress cases" in (tmp_path / "stress.md").read_text()
 
 
 def test_sharpness_and_psnr():
