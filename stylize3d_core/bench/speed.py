@@ -195,7 +195,8 @@ def _measure(scene: SpeedScene, s, v: Variant, hw: Tuple[int, int], preview: boo
                 return [s.render(scene.cameras[i], h, w, preview=preview) for i in range(len(scene.cameras))]
 
         ttff = median_time(first, repeats, warmup=warmup)
-        per_frame = median_time(frames, repeats, warmup=warmup) / len(scene.cameras)
+        # frames are cheap: always warm up once (allocator, thread pool), even in --quick
+        per_frame = median_time(frames, repeats, warmup=max(1, warmup)) / len(scene.cameras)
         out = [_resize(f, H, W) for f in frames()]
     finally:
         torch.set_num_threads(threads)
@@ -243,7 +244,7 @@ def run_speed(out: Path, quick: bool = False, show_progress: bool = False, log: 
     write_table(out, "speed", "Speed against quality", rows, cols, notes=[
         f"photo {scene.photo3d.size[1]}x{scene.photo3d.size[0]} ({len(scene.photo3d.points):,} points), "
         f"frames {W}x{H}, {len(scene.cameras)} cameras of the circle trajectory, median of {preset.repeats} "
-        f"run(s) after {preset.warmup} warm-up(s)" + (" (--quick preset)" if quick else ""),
+        f"run(s) after {max(1, preset.warmup)} warm-up(s) ({preset.warmup} for the first frame)" + (" (--quick preset)" if quick else ""),
         "error against the reference (full-quality float32 render): PSNR in dB (inf = identical) and the "
         "EfficientNet perceptual distance (0 = identical)",
         "first_frame_s: a new style (style CNN + AdaAttN) and the first frame; pareto: not beaten on both "
