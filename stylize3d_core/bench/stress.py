@@ -148,7 +148,7 @@ def _depth_scale(near: float, far: float) -> Callable[[bool], Images]:
     return run
 
 
-def _depth_file(values: str, expect_points: bool = True) -> Callable[[bool], Images]:
+def _depth_file(values: str) -> Callable[[bool], Images]:
     """A depth file (NPY) with NaN / inf / zero pixels, read through ``load_photo3d``."""
     def run(quick: bool) -> Images:
         from ..io.images import save_image
@@ -252,9 +252,10 @@ def _large_photo_file(quick: bool) -> Images:
     return plain_views(p3d, _default_cams(), 48, 64)
 
 
-def _cli(args: Dict[str, object], depth: Optional[np.ndarray] = None, expect_status: int = 0) -> Callable[[bool], Images]:
-    """``stylize3d render`` through ``app.cli.main`` is an application: the case runs the
-    library's pipeline job (``run_render``), which the CLI is a thin layer over."""
+def _job(args: Dict[str, object], depth: Optional[np.ndarray] = None) -> Callable[[bool], Images]:
+    """A render job (``pipeline.run_render``, what ``stylize3d render`` runs) of 3 PNG frames; ``args`` are
+    ``RenderJob`` fields, ``fov`` the photo's, ``style="__style__"`` a generated style image. The library cannot
+    import ``app/``: ``tests/stress`` runs the command line itself on the same inputs."""
     def run(quick: bool) -> Images:
         from ..io.images import load_image, save_image
         from ..pipeline import PhotoSpec, RenderJob, run_render
@@ -315,8 +316,8 @@ def cases() -> List[StressCase]:
         StressCase("photo file 4000 x 3000, shrunk", "size", _large_photo_file, heavy=True),
         StressCase("bfloat16 autocast", "dtype", _bfloat16(False), stylized=True),
         StressCase("bfloat16 style, float32 frames", "dtype", _bfloat16(True), stylized=True),
-        StressCase("job: NaN depth file, fov 150", "pipeline", _cli({"fov": 150.0}, depth=nan)),
-        StressCase("job: fov 5, stylized", "pipeline", _cli({"fov": 5.0, "style": "__style__"}), stylized=True),
+        StressCase("job: NaN depth file, fov 150", "pipeline", _job({"fov": 150.0}, depth=nan)),
+        StressCase("job: fov 5, stylized", "pipeline", _job({"fov": 5.0, "style": "__style__"}), stylized=True),
     ]
 
 
