@@ -2,6 +2,7 @@
 
     stylize3d render PHOTO [--depth SPEC] [--trajectory circle] [--frames 90]
                            [--fps 30] [--size 512] [-o out.mp4] [--save-ply FILE]
+    stylize3d bench speed|consistency|scaling|stress|skips [--quick] [--out bench/]
 
 Exit status: 0 on success, 2 for bad input (the message names the file or the
 setting), 1 when an output could not be written, 3 for an unexpected internal
@@ -78,6 +79,22 @@ def _add_info(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--json", action="store_true", help="print the report as JSON")
 
 
+BENCH_SUITES = ("speed", "consistency", "scaling", "stress", "skips")
+
+
+def _add_bench(sub: "argparse._SubParsersAction") -> None:
+    p = sub.add_parser("bench", help="measure speed against quality, consistency, scaling, skipped work; "
+                                     "run the numerical stress cases",
+                       description="Write Markdown + JSON tables and PNG plots to --out "
+                                   "(see stylize3d_core/bench/). Figures on a busy machine are pessimistic.")
+    p.add_argument("suite", choices=BENCH_SUITES, help="what to measure")
+    p.add_argument("--out", default="bench", help="folder for the tables and plots (default bench)")
+    p.add_argument("--quick", action="store_true", help="a small preset (seconds; what CI runs)")
+    p.add_argument("--photo", default=None, help="photo (default the shipped sample)")
+    p.add_argument("--style", default=None, help="style image (default the shipped style)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar, print nothing but errors")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from stylize3d_core import __version__
 
@@ -87,6 +104,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_render(sub)
     _add_training(sub)
     _add_info(sub)
+    _add_bench(sub)
     return parser
 
 
@@ -147,6 +165,20 @@ def _render(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bench(args: argparse.Namespace) -> int:
+    from stylize3d_core.bench.suites import run_suite
+
+    log = (lambda _msg: None) if args.quiet else (lambda msg: print(f"{PROG}: {msg}", file=sys.stderr))
+    rows = run_suite(args.suite, args.out, quick=args.quick, show_progress=not args.quiet, log=log,
+                     photo=args.photo, style=args.style)
+    if not args.quiet:
+        print(f"{PROG}: bench {args.suite}: {len(rows)} rows in {args.out}/", file=sys.stderr)
+    if args.suite == "stress" and not all(r["pass"] for r in rows):
+        print(f"{PROG}: bench stress: {sum(not r['pass'] for r in rows)} case(s) failed", file=sys.stderr)
+        return 1
+    return 0
+
+
 INTERNAL_ERROR = 3
 """Exit status of an unexpected exception (a bug): the traceback goes to a file, see :func:`_internal_error`."""
 
@@ -195,7 +227,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     shown, warnings.showwarning = warnings.showwarning, show_warning
     try:
         handlers = {"render": _render, "prepare-data": _prepare_data, "prepare-styles": _prepare_styles,
-                    "train": _train, "info": _info}
+                    "train": _train, "info": _info, "bench": _bench}
         return handlers[args.command](args)
     except InputError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)

@@ -116,7 +116,7 @@ class Stylized3DPhoto:
             self._geom = prepare_geometry(pts.xyz, pts.rgb, photo.fov_y_deg, photo.size,
                                           self.model.config.neighbourhood, seed=settings.seed)
             t1 = time.perf_counter()
-            self._content = self.model.encode(self._geom)  # (M, C)
+            self._content = self.model.encode(self._geom).float()  # (M, C), float32 even under an autocast
         t2 = time.perf_counter()
         self._order = random_order(self._geom.xyz.shape[0], settings.seed)  # (N,)
         self._xyz = self._geom.xyz.index_select(0, self._order).contiguous()  # (N, 3), random order
@@ -157,7 +157,7 @@ class Stylized3DPhoto:
             t0 = time.perf_counter()
             with torch.inference_mode():
                 maps = self._encoder()(style_tensor(style_rgb)).maps
-                self._stylized = self.model.stylizer.stylize(self._content, maps)  # (M, C)
+                self._stylized = self.model.stylizer.stylize(self._content, maps).float()  # (M, C), float32 after autocast
             self.timings["style"] = time.perf_counter() - t0
         self._dense = None
 
@@ -200,7 +200,8 @@ class Stylized3DPhoto:
             if not torch.isfinite(dense.sum()) and not torch.isfinite(dense).all():
                 raise InputError(self._checkpoint_name, "its weights make NaN or infinite features on this photo "
                                  "(the weights are finite but far too large: a diverged or corrupt checkpoint)")
-            self._dense = dense.index_select(0, self._order).contiguous()
+            # float32 whatever the autocast dtype (bfloat16 under torch.autocast): the rasterizer takes float32
+            self._dense = dense.float().index_select(0, self._order).contiguous()
         self.timings["upsample"] = time.perf_counter() - t0
 
     def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False,
@@ -228,7 +229,7 @@ class Stylized3DPhoto:
                     raise RenderInterrupted("render stopped before rasterizing")
                 rgb, _ = self.model.render_view(self._dense[:keep], self._xyz[:keep], camera, height, width,
                                                 supersample=ss)
-                rgb = torch.nan_to_num(rgb, nan=0.0).clamp_(0.0, 1.0)
+                rgb = torch.nan_to_num(rgb.float(), nan=0.0).clamp_(0.0, 1.0)  # float32 after a bfloat16 autocast
         finally:
             for h in hooks:
                 h.remove()

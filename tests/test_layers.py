@@ -27,6 +27,7 @@ LAYERS: Tuple[Tuple[str, ...], ...] = (
     ("export",),
     ("multiview",),
     ("eval", "pipeline"),
+    ("bench",),
     ("stylize3d_core",),
     ("info",),
 )

@@ -1,0 +1,73 @@
+"""The ``stylize3d bench`` suites: each runs its measurements and writes its tables and plots to a folder.
+
+``--quick`` presets are small enough for a CI test (seconds); the full presets
+are for a quiet machine. Every figure is timed with ``eval/timing.py``
+(median of repeated runs after a warm-up).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Callable, Iterable, List, Optional, TypeVar
+
+from .report import write_table
+from .stress import cases as stress_cases, run_case
+
+T = TypeVar("T")
+Log = Callable[[str], None]
+
+
+def _quiet(_: str) -> None:
+    return None
+
+
+def progress(items: Iterable[T], total: int, desc: str, enabled: bool) -> Iterable[T]:
+    """``items`` with a tqdm progress bar on stderr (or plain, when not ``enabled``)."""
+    if not enabled:
+        return items
+    from tqdm import tqdm
+
+    return tqdm(items, total=total, desc=desc, unit="case", leave=False)
+
+
+def run_stress(out: Path, quick: bool = False, show_progress: bool = False, log: Log = _quiet) -> List[dict]:
+    """Run the stress cases (``--quick``: the small ones without the model, and two with it); write ``stress.md/json``."""
+    chosen = stress_cases()
+    if quick:
+        model_cases = [c for c in chosen if c.stylized][:2]
+        chosen = [c for c in chosen if not (c.stylized or c.heavy)] + model_cases
+    rows = []
+    for case in progress(chosen, len(chosen), "stress", show_progress):
+        o = run_case(case, quick)
+        rows.append({"case": o.name, "category": o.category, "expected": o.expect, "outcome": o.outcome,
+                     "pass": o.passed, "seconds": o.seconds, "detail": o.detail})
+    failed = sum(not r["pass"] for r in rows)
+    write_table(Path(out), "stress", "Numerical stress cases", rows,
+                notes=[f"{len(rows) - failed} of {len(rows)} passed; pass = every image finite and in [0, 1], "
+                       "or an InputError where the input is unusable (expected 'error')",
+                       "cases: stylize3d_core/bench/stress.py" + (" (--quick subset)" if quick else "")])
+    log(f"stress: {len(rows) - failed} of {len(rows)} passed")
+    return rows
+
+
+def run_suite(name: str, out, quick: bool = False, show_progress: bool = False, log: Log = _quiet,
+              photo: Optional[str] = None, style: Optional[str] = None) -> List[dict]:
+    """Run the suite ``name`` (speed, consistency, scaling, stress, skips) and write its tables to ``out``."""
+    from ..errors import InputError
+
+    if name == "stress":
+        return run_stress(Path(out), quick, show_progress, log)
+    if name in ("speed", "skips"):
+        from .speed import run_skips, run_speed
+
+        fn = run_speed if name == "speed" else run_skips
+        return fn(Path(out), quick, show_progress, log, photo=photo, style=style)
+    if name == "consistency":
+        from .consistency import run_consistency
+
+        return run_consistency(Path(out), quick, show_progress, log, photo=photo, style=style)
+    if name == "scaling":
+        from .scaling import run_scaling
+
+        return run_scaling(Path(out), quick, show_progress, log, photo=photo)
+    raise InputError("suite", f"must be one of speed, consistency, scaling, stress, skips; got {name!r}")

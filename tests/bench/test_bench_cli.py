@@ -1,0 +1,50 @@
+"""``stylize3d bench speed|skips|stress --quick``: the tables are written and have the expected structure."""
+
+import json
+
+import cv2
+import pytest
+
+from app.cli import main
+
+
+def _table(folder, name):
+    data = json.loads((folder / f"{name}.json").read_text())
+    assert (folder / f"{name}.md").read_text().startswith(f"# {data['title']}")
+    assert data["rows"] and all(set(r) == set(data["columns"]) for r in data["rows"])
+    return data
+
+
+def test_bench_speed_quick(tmp_path):
+    assert main(["bench", "speed", "--quick", "-q", "--out", str(tmp_path)]) == 0
+    data = _table(tmp_path, "speed")
+    rows = data["rows"]
+    assert rows[0]["knob"] == "reference" and rows[0]["psnr_db"] == "inf" and rows[0]["perceptual"] == 0
+    knobs = {r["knob"] for r in rows}
+    assert {"point budget", "resolution", "supersampling", "bfloat16", "channels-last", "threads"} <= knobs
+    assert all(r["finite"] and r["ms_per_frame"] > 0 and r["first_frame_s"] > 0 for r in rows)
+    lossy = [r for r in rows if r["knob"] in ("resolution", "point budget")]
+    assert all(isinstance(r["psnr_db"], float) and r["perceptual"] > 0 for r in lossy)
+    assert any(r["pareto"] for r in rows)
+    assert cv2.imread(str(tmp_path / "speed.png")) is not None
+
+
+def test_bench_skips_quick(tmp_path):
+    assert main(["bench", "skips", "--quick", "-q", "--out", str(tmp_path)]) == 0
+    rows = {r["change"]: r for r in _table(tmp_path, "skips")["rows"]}
+    assert rows["strength only"]["holds"] and rows["strength only"]["max_abs_diff"] < 1e-5
+    assert rows["photo without depth edges"]["holds"]
+    assert rows["photo only"]["holds"] is False
+
+
+def test_bench_stress_quick(tmp_path):
+    assert main(["bench", "stress", "--quick", "-q", "--out", str(tmp_path)]) == 0
+    data = _table(tmp_path, "stress")
+    assert {"case", "category", "expected", "outcome", "pass", "seconds"} <= set(data["columns"])
+    assert all(r["pass"] for r in data["rows"]), [r for r in data["rows"] if not r["pass"]]
+    assert {"error", "image"} <= {r["expected"] for r in data["rows"]}
+
+
+def test_bench_bad_suite(capsys):
+    with pytest.raises(SystemExit):
+        main(["bench", "nonsense"])
