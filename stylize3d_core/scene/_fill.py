@@ -5,7 +5,7 @@ Nothing here validates its input: the public functions in ``ldi.py`` do.
 
 from __future__ import annotations
 
-from typing import List, NamedTuple, Tuple
+from typing import List, NamedTuple, Optional, Tuple
 
 import cv2
 import numpy as np
@@ -232,9 +232,9 @@ def local_linear_fit(
             texture gets no gradient, smooth shading keeps it.
     """
     h, w = weight.shape
-    wt = weight.astype(np.float64)
-    v = values.astype(np.float64)
-    y, x = np.mgrid[:h, :w].astype(np.float64)
+    wt = weight.astype(np.float32)
+    v = values.astype(np.float32)
+    y, x = np.mgrid[:h, :w].astype(np.float32)
     x -= w / 2.0
     y -= h / 2.0
 
@@ -264,7 +264,9 @@ def local_linear_fit(
     return LinearFit(mv, np.stack([mx + w / 2.0, my + h / 2.0], axis=-1), np.stack([gx, gy], axis=-1), s0)
 
 
-def extrapolate(fit: LinearFit, nearest: np.ndarray, targets: np.ndarray, max_step: float) -> np.ndarray:
+def extrapolate(
+    fit: LinearFit, nearest: np.ndarray, targets: np.ndarray, max_step: float, where: Optional[np.ndarray] = None
+) -> np.ndarray:
     """Continue, to every pixel, the linear fit of its nearest source (``nearest_index`` of them).
 
     ``value(p) = mean(q) + grad(q) . (p - centre(q))`` with ``q`` the nearest source;
@@ -274,16 +276,18 @@ def extrapolate(fit: LinearFit, nearest: np.ndarray, targets: np.ndarray, max_st
         fit: the fit over the sources.
         nearest: (H, W) int indices into the True pixels of ``targets`` (the sources).
         targets: (H, W) bool, the sources.
+        where: (H, W) bool, the pixels to compute (all by default; 0 elsewhere).
     Returns:
         (H, W, C) float32.
     """
     h, w = nearest.shape
-    y, x = np.mgrid[:h, :w].astype(np.float64)
-    mean = fit.mean[targets][nearest]  # (H, W, C)
-    centre = fit.centre[targets][nearest]  # (H, W, 2)
-    grad = fit.grad[targets][nearest]  # (H, W, C, 2)
-    step = grad[..., 0] * (x - centre[..., 0])[..., None] + grad[..., 1] * (y - centre[..., 1])[..., None]
-    return (mean + np.clip(step, -max_step, max_step)).astype(np.float32)
+    out = np.zeros((h, w, fit.mean.shape[-1]), np.float32)
+    rows, cols = np.nonzero(where) if where is not None else np.nonzero(np.ones((h, w), bool))
+    tr, tc = np.nonzero(targets)
+    k = nearest[rows, cols]
+    at = np.stack([tr[k], tc[k]], axis=1)  # (N, 2) the nearest source of each pixel
+    out[rows, cols] = continue_at(fit, at, (rows.astype(np.float64), cols.astype(np.float64)), max_step)
+    return out
 
 
 def scan_nearest(targets: np.ndarray) -> np.ndarray:

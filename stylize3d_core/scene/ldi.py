@@ -574,7 +574,7 @@ def _hidden_layer(
         lo = 0.5 * float(ndc[source].min())  # never much farther than anything seen
         nd_fit = local_linear_fit(ndc[..., None], srcw, s.fit_sigma, ridge=_DEPTH_RIDGE) if s.hidden_depth != "nearest" else None
         if nd_fit is not None:  # continue the background's local plane (nd is affine on it)
-            bg_nd = np.maximum(extrapolate(nd_fit, nearest, source, np.inf)[..., 0], lo)
+            bg_nd = np.maximum(extrapolate(nd_fit, nearest, source, np.inf, band)[..., 0], lo)
             bg_nd = np.where(source, ndc, bg_nd)
         else:
             bg_nd = ndc[source][nearest]  # (h, w)
@@ -594,7 +594,7 @@ def _hidden_layer(
         rim = mixed & ~band & ~members & (ndc < ref - t) & (dist <= reach)
         todo = band | rim
         if col_fit is not None:  # the background's colour and its gradient continued
-            colour = np.clip(extrapolate(col_fit, nearest, source, s.max_colour_step), 0.0, 1.0)
+            colour = np.clip(extrapolate(col_fit, nearest, source, s.max_colour_step, todo), 0.0, 1.0)
             if chosen_rgb is not None:
                 colour[band] = chosen_rgb
         elif s.inpaint_method == "push_pull":  # a multi-scale blend of the background sources
@@ -654,7 +654,7 @@ def _nearest_surface(
             rgb[sel] = continue_at(col_fit, cand[k][sel], (pix[0][sel], pix[1][sel]), s.max_colour_step)
     if not found.all():  # no candidate: the Voronoi continuation
         nearest = nearest_index(source)
-        fb = extrapolate(col_fit, nearest, source, s.max_colour_step)
+        fb = extrapolate(col_fit, nearest, source, s.max_colour_step, band)
         rgb[~found] = fb[br[~found], bc[~found]]
     return out, np.clip(rgb, 0.0, 1.0).astype(np.float32)
 

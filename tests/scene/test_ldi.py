@@ -433,7 +433,7 @@ def test_local_linear_fit_continues_a_plane_and_drops_noise_gradients():
     source = x >= 30  # the right half is seen; continue it to the left
     fit = local_linear_fit(plane, source.astype(np.float32), 2.0, ridge=0.0)
     out = extrapolate(fit, nearest_index(source), source, np.inf)
-    np.testing.assert_allclose(out[..., 0], plane[..., 0], atol=1e-6)  # exact for a plane
+    np.testing.assert_allclose(out[..., 0], plane[..., 0], atol=1e-4)  # exact for a plane (float32 moments)
     noise = np.random.default_rng(0).uniform(0.0, 0.3, (40, 60, 1))
     damped = local_linear_fit(noise, source.astype(np.float32), 2.0, damp=True)
     assert np.abs(damped.grad[source]).max() < 0.5 * np.abs(local_linear_fit(noise, source, 2.0).grad[source]).max()
