@@ -147,19 +147,27 @@ class LDISettings:
     step limited to ``max_colour_step``; ``cv2.INPAINT_TELEA`` (fast marching) or
     ``cv2.INPAINT_NS`` (Navier-Stokes) from the background sources; or ``"push_pull"``: their
     multi-scale blend alone (smooth, no streaks)."""
-    hidden_depth: Literal["surface", "plane", "nearest"] = "surface"
+    hidden_depth: Literal["surface", "plane", "nearest"] = "plane"
     """Depth of the hidden layer: ``"surface"``: the nearest of the background surfaces that
     continue behind the foreground from its four sides (the nearest background source along
     the pixel's row and column, each way, its local plane continued; one that would come out
     in front of the foreground is dropped), since a nearer continued surface hides a farther
     one: a ground plane continued behind a card hides the wall above the card, and the
     ground's continuation beyond the ground / wall crease lies behind the wall;
-    ``"plane"``: the local plane of the nearest background source
+    +2-7 dB on the analytic ground scene, but on estimated depth it opens holes (astronaut:
+    0.43 % at the trajectories' extremes against 0.05 %), so it is not the default;
+    ``"plane"`` (default): the local plane of the nearest background source
     continued (a linear fit of the disparity ``1/z`` over ``fit_sigma``, which is affine on a
     plane), so a ground plane's hidden part stays on the ground; ``"nearest"``: the disparity
     of the nearest background source (flat behind every edge pixel)."""
     fit_sigma: float = 2.0
     """Radius (pixels) of the local linear fits of the background behind an edge."""
+    border_hidden: bool = False
+    """Give the border a hidden layer behind foreground that the frame's edge cuts (the
+    background continued past the frame), so a camera looking past the edge sees no hole
+    behind, e.g., a tower cut by the frame. Off by default: rocket's holes at the trajectories'
+    extremes went only from 0.339 % to 0.335 % (its full dolly unchanged), and a smooth slanted
+    surface reaching the frame's edge gets a needless hidden layer there."""
     max_colour_step: float = 0.15
     """Largest change the colour's gradient may bring, per channel (in [0, 1] colour units)."""
 
@@ -316,6 +324,8 @@ def build_ldi(
         hidden_mask[inner] = mask1
         hidden_rgb[inner][mask1] = rgb1[mask1]
         hidden_depth[inner][mask1] = NEAR_DEPTH / nd1[mask1]
+    if pad > 0 and settings.border_hidden:
+        _border_hidden(image, nd, nd0, pad, settings, hidden_mask, hidden_rgb, hidden_depth)
     fg_c = np.zeros((hc, wc), bool)
     bg_c = np.zeros((hc, wc), bool)
     fg_c[inner], bg_c[inner] = fg, bg
@@ -355,6 +365,10 @@ _COLOUR_RIDGE = 0.02
 """Ridge of the local linear fits of the background's disparity and colour (relative to
 ``fit_sigma**2``): small, so a continued plane keeps its slope (a shrunk slope would bring a
 receding floor continued from below in front of the true one)."""
+
+_DEPTH_STEP = 1.0
+"""A continued background plane changes the disparity by at most this many ``disparity_jump``
+(an estimated depth's gentle slopes, continued far, would open gaps in the hidden layer)."""
 
 _SAME_SURFACE = 0.25
 """Continued background planes within this many ``disparity_jump`` of the nearest one are taken
@@ -574,7 +588,7 @@ def _hidden_layer(
         lo = 0.5 * float(ndc[source].min())  # never much farther than anything seen
         nd_fit = local_linear_fit(ndc[..., None], srcw, s.fit_sigma, ridge=_DEPTH_RIDGE) if s.hidden_depth != "nearest" else None
         if nd_fit is not None:  # continue the background's local plane (nd is affine on it)
-            bg_nd = np.maximum(extrapolate(nd_fit, nearest, source, np.inf, band)[..., 0], lo)
+            bg_nd = np.maximum(extrapolate(nd_fit, nearest, source, _DEPTH_STEP * s.disparity_jump, band)[..., 0], lo)
             bg_nd = np.where(source, ndc, bg_nd)
         else:
             bg_nd = ndc[source][nearest]  # (h, w)
@@ -634,7 +648,7 @@ def _nearest_surface(
     dist = np.abs(cand[..., 0] - br) + np.abs(cand[..., 1] - bc)  # (4, N) along the row or column
     for k in range(4):
         ok = cand[k, :, 0] >= 0
-        nds[k, ok] = continue_at(nd_fit, cand[k][ok], (pix[0][ok], pix[1][ok]), np.inf)[:, 0]
+        nds[k, ok] = continue_at(nd_fit, cand[k][ok], (pix[0][ok], pix[1][ok]), _DEPTH_STEP * s.disparity_jump)[:, 0]
     nds[(nds > limit) | (nds < lo)] = -np.inf  # in front of the foreground, or far beyond anything seen
     nearest_nd = nds.max(axis=0)  # (N,)
     # of the candidates on that nearest surface (within _SAME_SURFACE jumps of it), the closest source
@@ -657,6 +671,39 @@ def _nearest_surface(
         fb = extrapolate(col_fit, nearest, source, s.max_colour_step, band)
         rgb[~found] = fb[br[~found], bc[~found]]
     return out, np.clip(rgb, 0.0, 1.0).astype(np.float32)
+
+
+def _border_hidden(
+    rgb: np.ndarray, nd: np.ndarray, nd0: np.ndarray, pad: int, s: LDISettings,
+    hidden_mask: np.ndarray, hidden_rgb: np.ndarray, hidden_depth: np.ndarray,
+) -> None:
+    """Hidden background in the border, behind foreground that the frame's edge cuts (in place).
+
+    The border's layer 0 continues whatever reaches the frame's edge, a tower cut by it
+    too; a camera that looks past the edge then sees the tower's continuation with
+    nothing behind it. The photo's background pixels (within ``disparity_jump`` of the
+    farthest ``nd`` within ``pad`` of them) are continued into the border the same way
+    (push-pull); border pixels whose layer 0 is in front of that continuation by more
+    than ``disparity_jump`` get it as a hidden sample.
+    """
+    h, w = nd.shape
+    k = 2 * pad + 1
+    far = cv2.erode(nd, np.ones((k, k), np.uint8), borderType=cv2.BORDER_REPLICATE)
+    background = (nd - far <= s.disparity_jump).astype(np.float32)  # (H, W)
+    if background.all():
+        return  # nothing in front of anything: the border's layer 0 is background already
+    values = np.zeros((h + 2 * pad, w + 2 * pad, 4), np.float32)
+    weight = np.zeros((h + 2 * pad, w + 2 * pad), np.float32)
+    inner = (slice(pad, pad + h), slice(pad, pad + w))
+    values[inner] = np.concatenate([rgb, nd[..., None]], axis=2)
+    weight[inner] = background
+    filled = push_pull(values, weight)  # (Hc, Wc, 4) the background continued
+    outside = np.ones(nd0.shape, bool)
+    outside[inner] = False
+    add = outside & (nd0 - filled[..., 3] > s.disparity_jump) & (filled[..., 3] > 0)
+    hidden_mask |= add
+    hidden_rgb[add] = np.clip(filled[..., :3][add], 0.0, 1.0)
+    hidden_depth[add] = NEAR_DEPTH / filled[..., 3][add]
 
 
 def _extend_border(rgb: np.ndarray, nd: np.ndarray, pad: int) -> Tuple[np.ndarray, np.ndarray]:

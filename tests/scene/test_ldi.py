@@ -454,7 +454,7 @@ def test_hidden_ground_continues_the_ground_plane():
     inner = np.zeros((h, w), bool)
     inner[56:92, 66:94] = True  # away from the top edge (the plane's own bend)
     want = np.broadcast_to(floor_nd, (h, w))
-    for mode, rtol in (("plane", 0.08), ("surface", 0.3), ("nearest", 0.3)):  # the ridge shrinks slopes
+    for mode, rtol in (("plane", 0.1), ("nearest", 0.3)):  # ridge and step clip shrink slopes
         ldi = build_ldi(rgb, depth, LDISettings(band=0.08, hidden_depth=mode))
         mask = photo(ldi, ldi.hidden_mask)
         sel = mask & inner
