@@ -168,7 +168,7 @@ class LDISettings:
     behind, e.g., a tower cut by the frame. Off by default: rocket's holes at the trajectories'
     extremes went only from 0.339 % to 0.335 % (its full dolly unchanged), and a smooth slanted
     surface reaching the frame's edge gets a needless hidden layer there."""
-    max_colour_step: float = 0.15
+    max_colour_step: float = 0.05
     """Largest change the colour's gradient may bring, per channel (in [0, 1] colour units)."""
 
     def __post_init__(self) -> None:
