@@ -82,7 +82,6 @@ def main() -> None:
     worst = 0.0
     for name, rgb in test_photos(args.size):
         depth = estimate_depth(depth_source, rgb)
-        depth = getattr(depth, "depth_map", depth)  # newer sources return a PhotoDepth
         p3d = Photo3D.build(rgb, depth, Photo3DSettings())
         rng = CameraRange() if args.range == "default" else p3d.camera_range
         viewer, traj, dolly = hole_shares(p3d, rng, args.size, grow=not args.bilinear)

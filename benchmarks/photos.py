@@ -37,11 +37,7 @@ def test_photos(size: int) -> Iterator[Tuple[str, np.ndarray]]:
 
 
 def estimate_depth(source, rgb: np.ndarray):
-    """``source.estimate`` of a photo array, whether the source takes the array or a
-    loaded image (``io.images.load_image_array``, in newer libraries)."""
-    try:
-        return source.estimate(rgb)
-    except TypeError:
-        from stylize3d_core.io.images import load_image_array
+    """The ``DepthMap`` that the depth ``source`` gives the photo array ``rgb``."""
+    from stylize3d_core.io.images import load_image_array
 
-        return source.estimate(load_image_array(rgb, max_size=max(rgb.shape[:2])))
+    return source.estimate(load_image_array(rgb, max_size=max(rgb.shape[:2]))).depth_map
