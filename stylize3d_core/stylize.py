@@ -39,6 +39,8 @@ from .models.style_features import StyleEncoder
 from .models.scene_geometry import SceneGeometry, prepare_geometry
 from .models.stylize3d import Stylize3DModel
 from .render.plain import preview_point_count, random_order
+from .render.rasterize import RasterSettings
+from .render.rasterizer import PointRasterizer
 from .scene.photo3d import Photo3D
 
 
@@ -204,7 +206,8 @@ class Stylized3DPhoto:
         """One view (H, W, 3) float32 in [0, 1]; ``preview`` renders a point subset without supersampling.
 
         ``should_stop`` (any thread may make it return True) is checked between
-        the stages: before rasterizing, before each level of the decoder and
+        the stages: before rasterizing, between chunks of points while
+        rasterizing (:data:`~stylize3d_core.render.rasterize.CHUNK_POINTS`), before each level of the decoder and
         before its output layers; when it returns True the render stops with
         :class:`~stylize3d_core.errors.RenderInterrupted` (nothing is cached
         from a stopped render).
@@ -222,8 +225,15 @@ class Stylized3DPhoto:
             with torch.inference_mode():
                 if should_stop is not None and should_stop():
                     raise RenderInterrupted("render stopped before rasterizing")
-                rgb, _ = self.model.render_view(self._dense[:keep], self._xyz[:keep], camera, height, width,
-                                                supersample=ss)
+                if should_stop is None:
+                    rgb, _ = self.model.render_view(self._dense[:keep], self._xyz[:keep], camera, height, width,
+                                                    supersample=ss)
+                else:  # render_view's two steps, with the rasterizer stoppable between chunks of points
+                    raster = RasterSettings(height=int(height), width=int(width), supersample=ss)
+                    frags = PointRasterizer(raster)(self._xyz[:keep], self._dense[:keep], camera,
+                                                    should_stop=should_stop)
+                    features = frags.image.unsqueeze(0)  # (1, Cr, H, W)
+                    rgb = self.model.decoder(features, (~frags.hole).to(features.dtype)[None, None])[0]
                 rgb = torch.nan_to_num(rgb, nan=0.0).clamp_(0.0, 1.0)
         finally:
             for h in hooks:

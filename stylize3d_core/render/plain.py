@@ -13,13 +13,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Iterator, Tuple, Union
+from typing import Callable, Iterator, Optional, Tuple, Union
 
 import numpy as np
 import torch
 
 from ..checks import check_range
-from ..errors import InputError
+from ..errors import InputError, RenderInterrupted
 from ..geometry.camera import Cameras
 from ..scene.pointcloud import PointCloud, PointTensors
 from .holes import fill_holes
@@ -105,9 +105,14 @@ class PlainRenderer:
     def num_points(self) -> int:
         return int(self._xyz.shape[0])
 
-    def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False) -> np.ndarray:
+    def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False,
+               should_stop: Optional[Callable[[], bool]] = None) -> np.ndarray:
         """One frame (H, W, 3) float32 in [0, 1] seen by the single camera ``camera``;
-        ``preview`` rasterizes only :func:`preview_point_count` of the points."""
+        ``preview`` rasterizes only :func:`preview_point_count` of the points.
+
+        ``should_stop`` is checked between chunks of points while rasterizing and
+        before the hole filling; True stops with
+        :class:`~stylize3d_core.errors.RenderInterrupted`."""
         keep = self.num_points
         if preview:
             keep = preview_point_count(keep, height, width, self.settings.preview_points_per_pixel)
@@ -116,7 +121,9 @@ class PlainRenderer:
             depth_tolerance=self.settings.depth_tolerance, supersample=self.settings.supersample,
         )
         with torch.inference_mode():
-            frags = PointRasterizer(raster)(self._xyz[:keep], self._rgb[:keep], camera)
+            frags = PointRasterizer(raster)(self._xyz[:keep], self._rgb[:keep], camera, should_stop=should_stop)
+            if should_stop is not None and should_stop():
+                raise RenderInterrupted("render stopped before filling holes")
             image = fill_holes(frags.image, frags.hole).clamp_(0.0, 1.0)  # (3, H, W), never NaN
         return image.permute(1, 2, 0).contiguous().numpy()
 

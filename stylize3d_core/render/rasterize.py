@@ -42,6 +42,14 @@ pre-normalised weights times the features, computed by ``embedding_bag`` (one
 bag of point indices per pixel), which never materialises a (4N, C) tensor. Its
 gradient is the transposed matrix, again an ``embedding_bag`` (one bag of pixel
 indices per point). Cost is linear in N and H*W.
+
+Interruptible rasterization (``should_stop=``, e.g. the viewer's full frames):
+the work runs in steps of about ``chunk_points`` points (default
+:data:`CHUNK_POINTS`), with the check before each: culling, splatting and the
+z-buffer per chunk of points, then the kept test per chunk, the weight sums in
+order, and the feature accumulation in bands of consecutive pixels (each bag
+keeps its entries and their order). The result is identical, to the bit, to
+the one-shot rasterization.
 """
 
 from __future__ import annotations
@@ -49,13 +57,13 @@ from __future__ import annotations
 import math
 import numbers
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Callable, List, NamedTuple, Optional
 
 import torch
 import torch.nn.functional as F
 
 from ..checks import check_range, check_shape
-from ..errors import InputError
+from ..errors import InputError, RenderInterrupted
 from ..geometry.camera import project
 
 MAX_IMAGE_SIDE = 16384
@@ -164,47 +172,71 @@ def _check_inputs(points_cam: torch.Tensor, features: torch.Tensor, K: torch.Ten
             raise InputError("features", "contains NaN or infinite values")
 
 
+def _check_stop(should_stop: Optional[Callable[[], bool]]) -> None:
+    if should_stop is not None and should_stop():
+        raise RenderInterrupted("render stopped while rasterizing")
+
+
+def _pieces(n: int, step: Optional[int]) -> List[slice]:
+    """Consecutive slices covering range(n), ``step`` long (one slice if None); one empty slice if n == 0."""
+    if step is None or n <= step:
+        return [slice(0, n)]
+    return [slice(i, min(i + step, n)) for i in range(0, n, step)]
+
+
 @torch.no_grad()
-def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings) -> _Splats:
+def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings,
+           should_stop: Optional[Callable[[], bool]] = None, chunk: Optional[int] = None) -> _Splats:
     """Cull, splat and z-buffer: everything but the feature accumulation.
 
     Per-corner arrays are (4, M), corner-major (00, 01, 10, 11 as (dy, dx)):
     element-wise work on contiguous rows is several times faster than on (M, 4).
+
+    With ``chunk``, the points are processed ``chunk`` at a time (``should_stop``
+    checked before each): the z-buffer is a min, so the result is the same.
     """
     s = settings.supersample
     H, W = settings.height, settings.width
     Hs, Ws = H * s, W * s  # raster (sub-pixel) size
     dtype = points_cam.dtype if points_cam.dtype == torch.float64 else torch.float32
     dev = points_cam.device
-    pts = points_cam.detach().to(dtype)
     Ks = K.detach().to(device=dev, dtype=dtype).clone()
     Ks[:2] *= s  # (3, 3) intrinsics of the sub-pixel raster
-    uv, z = project(pts, Ks)  # (N, 2), (N,)
-    a, b = uv[:, 0] - 0.5, uv[:, 1] - 0.5  # (N,) integers at pixel centres
-    # NaN fails every comparison; an infinite x or y gives an infinite a or b.
-    inside = (z > settings.near_clip) & (z < math.inf) & (a > -1) & (a < Ws) & (b > -1) & (b < Hs)
-    idx = inside.nonzero().squeeze(1)  # (M,) surviving points, ascending
-    a, b, z = a.index_select(0, idx), b.index_select(0, idx), z.index_select(0, idx)  # (M,)
-    x0f, y0f = a.floor(), b.floor()
-    fx, fy = a - x0f, b - y0f
-    gx, gy = 1.0 - fx, 1.0 - fy
-    x0, y0 = x0f.long(), y0f.long()  # (M,) in [-1, Ws - 1], [-1, Hs - 1]
-    w4 = torch.stack([gx * gy, fx * gy, gx * fy, fx * fy])  # (4, M)
-
+    Wp = Ws + 2
+    corner_q = torch.tensor([[0], [1], [Wp], [Wp + 1]], device=dev)
+    corner_o = torch.tensor([[0], [1], [W], [W + 1]], device=dev)
     # Z-buffer on a raster padded by one pixel on each side, so that no corner
     # needs a bounds test: the padding holds -inf, which keeps nothing there.
-    # Zero-weight corners (a point exactly on a pixel centre row or column) do
-    # not take part: their depth is +inf.
-    Wp = Ws + 2
-    q = y0 * Wp + x0 + (Wp + 1)  # (M,) padded index of corner 00
-    q4 = (q + torch.tensor([[0], [1], [Wp], [Wp + 1]], device=dev)).view(-1)  # (4M,)
-    positive = w4 > 0  # (4, M)
-    z4 = torch.where(positive, z, math.inf)  # (4, M)
     zbuf = torch.full((Hs + 2, Wp), -math.inf, dtype=dtype, device=dev)
     zbuf[1:-1, 1:-1] = math.inf
     zbuf = zbuf.view(-1)
-    zbuf.scatter_reduce_(0, q4, z4.view(-1), reduce="amin")
+
+    parts = []
+    for piece in _pieces(points_cam.shape[0], chunk):
+        _check_stop(should_stop)
+        pts = points_cam[piece].detach().to(dtype)
+        uv, z = project(pts, Ks)  # (n, 2), (n,)
+        a, b = uv[:, 0] - 0.5, uv[:, 1] - 0.5  # (n,) integers at pixel centres
+        # NaN fails every comparison; an infinite x or y gives an infinite a or b.
+        inside = (z > settings.near_clip) & (z < math.inf) & (a > -1) & (a < Ws) & (b > -1) & (b < Hs)
+        idx = inside.nonzero().squeeze(1)  # (m,) surviving points, ascending
+        a, b, z = a.index_select(0, idx), b.index_select(0, idx), z.index_select(0, idx)  # (m,)
+        x0f, y0f = a.floor(), b.floor()
+        fx, fy = a - x0f, b - y0f
+        gx, gy = 1.0 - fx, 1.0 - fy
+        x0, y0 = x0f.long(), y0f.long()  # (m,) in [-1, Ws - 1], [-1, Hs - 1]
+        w4 = torch.stack([gx * gy, fx * gy, gx * fy, fx * fy])  # (4, m)
+        # Zero-weight corners (a point exactly on a pixel centre row or column) do
+        # not take part: their depth is +inf.
+        q4 = (y0 * Wp + x0 + (Wp + 1) + corner_q).view(-1)  # (4m,) padded index of each corner
+        positive = w4 > 0  # (4, m)
+        z4 = torch.where(positive, z, math.inf)  # (4, m)
+        zbuf.scatter_reduce_(0, q4, z4.view(-1), reduce="amin")
+        parts.append((idx + piece.start, x0, y0, w4, positive, z4, q4))
+
+    zfront = zbuf
     if s == 2:
+        _check_stop(should_stop)
         # Visibility splatting: a sub-pixel's front is the nearest depth in its 3 x 3
         # neighbourhood, so a surface behind cannot show through the gaps between
         # the 2 x 2 splats of a front surface (they are 2 sub-pixels apart).
@@ -212,24 +244,32 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings) 
         near = -F.max_pool2d(-zin[None, None], 3, stride=1, padding=1)[0, 0]  # (Hs, Ws)
         zfront = torch.full((Hs + 2, Wp), -math.inf, dtype=dtype, device=dev)
         zfront[1:-1, 1:-1] = near
-        front = zfront.view(-1).index_select(0, q4).view(4, -1)  # (4, M)
-    else:
-        front = zbuf.index_select(0, q4).view(4, -1)  # (4, M)
-    kept = (z4 <= front * (1.0 + settings.depth_tolerance)) & positive  # (4, M)
+        zfront = zfront.view(-1)
 
-    # Output pixel of each corner: sub-pixel // s.
-    if s == 1:
-        o4 = y0 * W + x0 + torch.tensor([[0], [1], [W], [W + 1]], device=dev)  # (4, M)
-    else:
-        ox0, ox1, oy0, oy1 = x0 >> 1, (x0 + 1) >> 1, (y0 >> 1) * W, ((y0 + 1) >> 1) * W
-        o4 = torch.stack([oy0 + ox0, oy0 + ox1, oy1 + ox0, oy1 + ox1])  # (4, M)
-    o4 = torch.where(kept, o4, 0)
-    w4 = torch.where(kept, w4, 0.0)
+    points, pixels, weights, kepts = [], [], [], []
+    for idx, x0, y0, w4, positive, z4, q4 in parts:
+        if len(parts) > 1:
+            _check_stop(should_stop)
+        front = zfront.index_select(0, q4).view(4, -1)  # (4, m)
+        kept = (z4 <= front * (1.0 + settings.depth_tolerance)) & positive  # (4, m)
+        # Output pixel of each corner: sub-pixel // s.
+        if s == 1:
+            o4 = y0 * W + x0 + corner_o  # (4, m)
+        else:
+            ox0, ox1, oy0, oy1 = x0 >> 1, (x0 + 1) >> 1, (y0 >> 1) * W, ((y0 + 1) >> 1) * W
+            o4 = torch.stack([oy0 + ox0, oy0 + ox1, oy1 + ox0, oy1 + ox1])  # (4, m)
+        points.append(idx)
+        pixels.append(torch.where(kept, o4, 0))
+        weights.append(torch.where(kept, w4, 0.0))
+        kepts.append(kept)
 
     depth = zbuf.view(Hs + 2, Wp)[1:-1, 1:-1]  # (Hs, Ws)
     if s == 2:
         depth = depth.reshape(H, 2, W, 2).amin(dim=(1, 3))
-    return _Splats(idx, o4, w4, kept, depth.clone())
+    if len(parts) == 1:
+        return _Splats(points[0], pixels[0], weights[0], kepts[0], depth.clone())
+    return _Splats(torch.cat(points), torch.cat(pixels, 1), torch.cat(weights, 1), torch.cat(kepts, 1),
+                   depth.clone())
 
 
 def _bag_sum(index: torch.Tensor, table: torch.Tensor, offsets: torch.Tensor, weights: torch.Tensor):
@@ -260,8 +300,13 @@ def _offsets(counts: torch.Tensor, dtype: torch.dtype = torch.long) -> torch.Ten
     return out
 
 
+CHUNK_POINTS = 1 << 18
+"""Points per step of an interruptible rasterization (``should_stop`` given): ~30-40 ms each on one CPU core."""
+
+
 def rasterize_points(
-    points_cam: torch.Tensor, features: torch.Tensor, K: torch.Tensor, settings: RasterSettings
+    points_cam: torch.Tensor, features: torch.Tensor, K: torch.Tensor, settings: RasterSettings, *,
+    should_stop: Optional[Callable[[], bool]] = None, chunk_points: Optional[int] = None,
 ) -> Fragments:
     """Rasterize points with features into an image (see the module docstring).
 
@@ -272,41 +317,64 @@ def rasterize_points(
         K: (3, 3) finite intrinsics at the output size (H, W) (skew is ignored,
             as in :func:`stylize3d_core.geometry.camera.project`).
         settings: image size, depth tolerance, supersampling, hole threshold, near clip.
+        should_stop: checked between steps of about ``chunk_points`` points (or
+            corners); once it returns True the call raises
+            :class:`~stylize3d_core.errors.RenderInterrupted`.
+        chunk_points: points per step (default :data:`CHUNK_POINTS` with
+            ``should_stop``, else all at once). The result is the same, to the
+            bit, at any chunk size: the z-buffer is a min, the weight sums are
+            added in the same order, and the feature accumulation runs in bands
+            of pixels whose bags hold the same entries in the same order.
     Returns:
         :class:`Fragments` ``image (C, H, W), weight (H, W), depth (H, W), hole (H, W)``.
     Raises:
-        InputError: on a wrong shape or dtype, a non-finite K or features.
+        InputError: on a wrong shape or dtype, a non-finite K or features, a chunk_points < 1.
+        RenderInterrupted: ``should_stop()`` returned True.
     """
     _check_inputs(points_cam, features, K, settings)
+    if chunk_points is None and should_stop is not None:
+        chunk_points = CHUNK_POINTS
+    if chunk_points is not None:
+        if isinstance(chunk_points, bool) or not isinstance(chunk_points, numbers.Integral) or chunk_points < 1:
+            raise InputError("chunk_points", f"must be a positive integer, got {chunk_points!r}")
+        chunk_points = int(chunk_points)
     H, W = settings.height, settings.width
     C = features.shape[1]
     N = points_cam.shape[0]
-    sp = _splat(points_cam, K, settings)
+    sp = _splat(points_cam, K, settings, should_stop, chunk_points)
     M = sp.point.shape[0]
+    step = None if chunk_points is None else 4 * chunk_points  # corners per step
     with torch.no_grad():
         w4 = sp.weight.to(features.dtype)  # (4, M)
         pix4 = sp.pixel.view(-1)  # (4M,)
+        w4f = w4.view(-1)
         wsum = torch.zeros(H * W, dtype=features.dtype, device=features.device)
-        wsum.index_add_(0, pix4, w4.view(-1))  # (HW,)
+        for piece in _pieces(4 * M, step):  # in order: the same sums as one index_add_
+            _check_stop(should_stop)
+            wsum.index_add_(0, pix4[piece], w4f[piece])  # (HW,)
         hole = wsum < settings.hole_weight_threshold  # (HW,)
         inv = torch.where(hole, 0.0, 1.0 / wsum.clamp_min(settings.hole_weight_threshold))  # (HW,)
-        nw4 = w4 * inv.index_select(0, pix4).view(4, M)  # (4, M) weights normalised per pixel, 0 at holes
-        # Pixel-major bags of the kept corners: gather in corner-major order
-        # (cache friendly), then permute once by pixel. int32 sorts and gathers
+        # Kept corners, flat corner-major (cache friendly): pixel, feature row and
+        # weight normalised per pixel (0 at holes). int32 sorts and gathers
         # faster; indices are < 2**28 (MAX_IMAGE_SIDE**2) and N < 2**31.
-        e = sp.kept.view(-1).nonzero().squeeze(1)  # (E,) flat corner-major indices
-        pix_e = pix4.index_select(0, e)  # (E,)
-        pt_e = sp.point.int().repeat(4).index_select(0, e)  # (E,) feature row of each entry
-        w_e = nw4.view(-1).index_select(0, e)  # (E,)
-        order = torch.sort(pix_e.int(), stable=True).indices  # (E,) pixel-major
-        pix_index = pt_e.index_select(0, order)  # (E,) int32
-        pix_weights = w_e.index_select(0, order)  # (E,)
-        pix_offsets = _offsets(torch.bincount(pix_e, minlength=H * W), torch.int32)  # (HW + 1,)
+        pt4 = sp.point.int().repeat(4)  # (4M,)
+        kept4 = sp.kept.view(-1)
+        pix_l, pt_l, w_l = [], [], []
+        for piece in _pieces(4 * M, step):
+            _check_stop(should_stop)
+            e = kept4[piece].nonzero().squeeze(1) + piece.start  # (e,) ascending
+            pix_c = pix4.index_select(0, e)
+            pix_l.append(pix_c)
+            pt_l.append(pt4.index_select(0, e))
+            w_l.append(w4f.index_select(0, e) * inv.index_select(0, pix_c))
+        pix_e, pt_e, w_e = (t[0] if len(t) == 1 else torch.cat(t) for t in (pix_l, pt_l, w_l))  # (E,)
     table = features if features.is_contiguous() else features.contiguous()
     if torch.is_grad_enabled() and features.requires_grad:
         with torch.no_grad():
+            pix_index, pix_offsets, pix_weights = _pixel_bags(pix_e, pt_e, w_e, 0, H * W)
             # Point-major bags for the gradient: the 4 corners of each surviving
             # point (weight 0 where not kept), none for culled points.
+            nw4 = w4 * inv.index_select(0, pix4).view(4, M)  # (4, M)
             pt_index = sp.pixel.t().reshape(-1)  # (4M,)
             pt_weights = nw4.t().reshape(-1)  # (4M,)
             counts = torch.zeros(N, dtype=torch.long, device=features.device)
@@ -314,9 +382,48 @@ def rasterize_points(
             pt_offsets = _offsets(counts)  # (N + 1,)
         out = _SparseSplat.apply(table, pix_index, pix_offsets, pix_weights, pt_index, pt_offsets, pt_weights)
     else:
-        out = _bag_sum(pix_index, table, pix_offsets, pix_weights)  # (HW, C)
+        out = _accumulate(pix_e, pt_e, w_e, table, H * W, step, should_stop)
     image = out.view(H, W, C).permute(2, 0, 1)  # (C, H, W), channels-last memory
     hole = hole.view(H, W)
     depth = torch.where(hole, math.inf, sp.depth.to(features.dtype))
     return Fragments(image, wsum.view(H, W), depth, hole)
 
+
+def _pixel_bags(pix_e: torch.Tensor, pt_e: torch.Tensor, w_e: torch.Tensor, lo: int, hi: int):
+    """Bags of the entries of pixels lo..hi-1 (all entries must lie there), pixel-major, each bag in entry order:
+    (feature rows (E,) int32, offsets (hi - lo + 1,) int32, weights (E,))."""
+    order = torch.sort(pix_e.int(), stable=True).indices  # (E,) pixel-major
+    offsets = _offsets(torch.bincount(pix_e - lo, minlength=hi - lo), torch.int32)  # (hi - lo + 1,)
+    return pt_e.index_select(0, order), offsets, w_e.index_select(0, order)
+
+
+def _accumulate(pix_e: torch.Tensor, pt_e: torch.Tensor, w_e: torch.Tensor, table: torch.Tensor, n_pixels: int,
+                step: Optional[int], should_stop: Optional[Callable[[], bool]]) -> torch.Tensor:
+    """(n_pixels, C): per pixel, the weighted sum of its entries' feature rows (inference only).
+
+    With ``step``, in bands of consecutive pixels holding about ``step`` entries
+    each (``should_stop`` checked before each band); a pixel's bag holds the
+    same entries in the same order as in one pass, so the sums are identical.
+    """
+    E = pix_e.shape[0]
+    if step is None or E <= step:
+        _check_stop(should_stop)
+        return _bag_sum_bags(_pixel_bags(pix_e, pt_e, w_e, 0, n_pixels), table)
+    n_bands = -(-E // step)
+    band_px = -(-n_pixels // n_bands)
+    out = torch.empty(n_pixels, table.shape[1], dtype=table.dtype, device=table.device)
+    band = torch.div(pix_e, band_px, rounding_mode="floor").int()  # (E,) band of each entry
+    for k in range(n_bands):
+        _check_stop(should_stop)
+        lo, hi = k * band_px, min((k + 1) * band_px, n_pixels)
+        if lo >= hi:
+            break
+        sel = (band == k).nonzero().squeeze(1)  # (e,) ascending: the entries keep their order
+        bags = _pixel_bags(pix_e.index_select(0, sel), pt_e.index_select(0, sel), w_e.index_select(0, sel), lo, hi)
+        out[lo:hi] = _bag_sum_bags(bags, table)
+    return out
+
+
+def _bag_sum_bags(bags, table: torch.Tensor) -> torch.Tensor:
+    index, offsets, weights = bags
+    return _bag_sum(index, table, offsets, weights)

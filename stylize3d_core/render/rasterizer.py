@@ -8,6 +8,8 @@ and rasterizes.
 
 from __future__ import annotations
 
+from typing import Callable, Optional
+
 import torch
 from torch import nn
 
@@ -30,13 +32,16 @@ class PointRasterizer(nn.Module):
             raise InputError("settings", f"expected RasterSettings, got {type(settings).__name__}")
         self.settings = settings
 
-    def forward(self, points_world: torch.Tensor, features: torch.Tensor, cameras: Cameras) -> Fragments:
+    def forward(self, points_world: torch.Tensor, features: torch.Tensor, cameras: Cameras, *,
+                should_stop: Optional[Callable[[], bool]] = None) -> Fragments:
         """Render ``features`` at ``points_world`` from the single camera in ``cameras``.
 
         Args:
             points_world: (N, 3) floating points in world coordinates.
             features: (N, C) float32/float64 features (gradients flow to them).
             cameras: a :class:`Cameras` batch of exactly one camera.
+            should_stop: checked between chunks of points (see :func:`rasterize_points`);
+                True stops with :class:`~stylize3d_core.errors.RenderInterrupted`.
         Returns:
             :class:`Fragments` ``image (C, H, W), weight (H, W), depth (H, W), hole (H, W)``.
         """
@@ -51,7 +56,7 @@ class PointRasterizer(nn.Module):
         world_to_cam = cameras.world_to_cam()[0].to(device=device, dtype=dtype)  # (4, 4)
         points_cam = transform_points(world_to_cam, points_world.detach())  # (N, 3)
         K = cameras.intrinsics(self.settings.height, self.settings.width, dtype=dtype)[0].to(device)  # (3, 3)
-        return rasterize_points(points_cam, features, K, self.settings)
+        return rasterize_points(points_cam, features, K, self.settings, should_stop=should_stop)
 
     def extra_repr(self) -> str:
         return repr(self.settings)

@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from stylize3d_core.errors import InputError
+from stylize3d_core.errors import InputError, RenderInterrupted
 from stylize3d_core.geometry.camera import Cameras, intrinsics_from_fov, transform_points
 from stylize3d_core.render import Fragments, PointRasterizer, RasterSettings, rasterize_points
 from stylize3d_core.render.rasterize_reference import rasterize_points_reference
@@ -286,6 +286,72 @@ def test_float32_matches_reference():
     assert torch.allclose(fast.image, ref.image, atol=1e-5)
     assert torch.allclose(fast.weight, ref.weight, atol=1e-5)
     assert torch.equal(fast.hole, ref.hole)
+
+
+# ----------------------------------------------------------------------------- chunked (interruptible)
+
+
+@pytest.mark.parametrize("supersample", [1, 2])
+@pytest.mark.parametrize("chunk", [1, 7, 64, 1000])
+@pytest.mark.parametrize("dtype", [F64, torch.float32])
+def test_chunked_is_identical_to_one_shot_and_matches_reference(supersample, chunk, dtype):
+    H, W = 13, 17
+    pts, feats, K = random_scene(H, W, 400, 5, seed=3, dtype=dtype)
+    settings = RasterSettings(H, W, supersample=supersample)
+    calls = []
+    with torch.inference_mode():
+        one = rasterize_points(pts, feats, K, settings)
+        chunked = rasterize_points(pts, feats, K, settings, chunk_points=chunk,
+                                   should_stop=lambda: calls.append(1) and False)
+    ref = rasterize_points_reference(pts, feats, K, settings)
+    for a, b in zip(one, chunked):
+        assert torch.equal(a, b)  # to the bit
+    if dtype == F64:  # (float32 rounding can flip a z-buffer test at the tolerance's edge)
+        assert torch.allclose(chunked.image, ref.image, atol=1e-12)
+        assert torch.equal(chunked.hole, ref.hole)
+    # Steps: the point chunks (twice), the weight sums, the kept corners, the pixel bands.
+    n_chunks = -(-400 // chunk)
+    assert len(calls) >= (2 * n_chunks if chunk < 400 else 1)
+
+
+def test_chunked_with_gradient_is_identical():
+    pts, feats, K = random_scene(9, 11, 200, 3, seed=5)
+    settings = RasterSettings(9, 11)
+    fa, fb = feats.clone().requires_grad_(True), feats.clone().requires_grad_(True)
+    a = rasterize_points(pts, fa, K, settings)
+    b = rasterize_points(pts, fb, K, settings, chunk_points=13, should_stop=lambda: False)
+    assert torch.equal(a.image, b.image)
+    a.image.sum().backward()
+    b.image.sum().backward()
+    assert torch.equal(fa.grad, fb.grad)
+
+
+@pytest.mark.parametrize("stop_after", [0, 1, 3, 10, 30])
+def test_should_stop_interrupts_between_chunks(stop_after):
+    pts, feats, K = random_scene(13, 17, 400, 5, seed=3)
+    calls = []
+
+    def should_stop():
+        calls.append(1)
+        return len(calls) > stop_after
+
+    with pytest.raises(RenderInterrupted):
+        rasterize_points(pts, feats, K, RasterSettings(13, 17), chunk_points=16, should_stop=should_stop)
+    assert len(calls) == stop_after + 1  # stopped at the first check that said so
+
+
+def test_empty_cloud_with_chunks():
+    K = simple_K()
+    frag = rasterize_points(torch.zeros(0, 3, dtype=F64), torch.zeros(0, 2, dtype=F64), K, RasterSettings(6, 8),
+                            chunk_points=4, should_stop=lambda: False)
+    assert frag.hole.all() and torch.equal(frag.image, torch.zeros(2, 6, 8, dtype=F64))
+
+
+@pytest.mark.parametrize("chunk", [0, -1, 2.5, True])
+def test_bad_chunk_points(chunk):
+    pts, feats = scene(simple_K(), [(2.5, 3.5, 2.0)])
+    with pytest.raises(InputError, match="chunk_points"):
+        rasterize_points(pts, feats, simple_K(), RasterSettings(6, 8), chunk_points=chunk)
 
 
 @pytest.mark.parametrize("supersample", [1, 2])
