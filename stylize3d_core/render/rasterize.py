@@ -142,6 +142,7 @@ class _Splats(NamedTuple):
     weight: torch.Tensor  # (4, M) bilinear weight of each corner, 0 where not kept
     kept: torch.Tensor  # (4, M) bool, the corner survived the z-buffer test
     depth: torch.Tensor  # (H, W) front-most depth, +inf where nothing landed
+    corner00: Optional[torch.Tensor] = None  # (M,) int64 output pixel of corner 00 (unmasked), supersample 1 only
 
 
 def _check_inputs(points_cam: torch.Tensor, features: torch.Tensor, K: torch.Tensor, settings) -> None:
@@ -246,7 +247,7 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings,
         zfront[1:-1, 1:-1] = near
         zfront = zfront.view(-1)
 
-    points, pixels, weights, kepts = [], [], [], []
+    points, pixels, weights, kepts, corners00 = [], [], [], [], []
     for idx, x0, y0, w4, positive, z4, q4 in parts:
         if len(parts) > 1:
             _check_stop(should_stop)
@@ -254,7 +255,9 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings,
         kept = (z4 <= front * (1.0 + settings.depth_tolerance)) & positive  # (4, m)
         # Output pixel of each corner: sub-pixel // s.
         if s == 1:
-            o4 = y0 * W + x0 + corner_o  # (4, m)
+            o00 = y0 * W + x0  # (m,)
+            corners00.append(o00)
+            o4 = o00 + corner_o  # (4, m)
         else:
             ox0, ox1, oy0, oy1 = x0 >> 1, (x0 + 1) >> 1, (y0 >> 1) * W, ((y0 + 1) >> 1) * W
             o4 = torch.stack([oy0 + ox0, oy0 + ox1, oy1 + ox0, oy1 + ox1])  # (4, m)
@@ -266,10 +269,11 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings,
     depth = zbuf.view(Hs + 2, Wp)[1:-1, 1:-1]  # (Hs, Ws)
     if s == 2:
         depth = depth.reshape(H, 2, W, 2).amin(dim=(1, 3))
+    c00 = (corners00[0] if len(corners00) == 1 else torch.cat(corners00)) if s == 1 else None
     if len(parts) == 1:
-        return _Splats(points[0], pixels[0], weights[0], kepts[0], depth.clone())
+        return _Splats(points[0], pixels[0], weights[0], kepts[0], depth.clone(), c00)
     return _Splats(torch.cat(points), torch.cat(pixels, 1), torch.cat(weights, 1), torch.cat(kepts, 1),
-                   depth.clone())
+                   depth.clone(), c00)
 
 
 def _bag_sum(index: torch.Tensor, table: torch.Tensor, offsets: torch.Tensor, weights: torch.Tensor):
@@ -299,6 +303,11 @@ def _offsets(counts: torch.Tensor, dtype: torch.dtype = torch.long) -> torch.Ten
     torch.cumsum(counts, dim=0, out=out[1:])
     return out
 
+
+CORNER_PATH_MAX_CHANNELS = 16
+"""At supersample 1, inference with at most this many channels (the plain renderer's colours) accumulates
+per corner after one sort of the points (:func:`_accumulate_by_corner`); wider features (the model's) are
+faster with one sort of all the kept corners, which reads each feature row once per pixel."""
 
 CHUNK_POINTS = 1 << 18
 """Points per step of an interruptible rasterization (``should_stop`` given): ~30-40 ms each on one CPU core."""
@@ -354,23 +363,10 @@ def rasterize_points(
             wsum.index_add_(0, pix4[piece], w4f[piece])  # (HW,)
         hole = wsum < settings.hole_weight_threshold  # (HW,)
         inv = torch.where(hole, 0.0, 1.0 / wsum.clamp_min(settings.hole_weight_threshold))  # (HW,)
-        # Kept corners, flat corner-major (cache friendly): pixel, feature row and
-        # weight normalised per pixel (0 at holes). int32 sorts and gathers
-        # faster; indices are < 2**28 (MAX_IMAGE_SIDE**2) and N < 2**31.
-        pt4 = sp.point.int().repeat(4)  # (4M,)
-        kept4 = sp.kept.view(-1)
-        pix_l, pt_l, w_l = [], [], []
-        for piece in _pieces(4 * M, step):
-            _check_stop(should_stop)
-            e = kept4[piece].nonzero().squeeze(1) + piece.start  # (e,) ascending
-            pix_c = pix4.index_select(0, e)
-            pix_l.append(pix_c)
-            pt_l.append(pt4.index_select(0, e))
-            w_l.append(w4f.index_select(0, e) * inv.index_select(0, pix_c))
-        pix_e, pt_e, w_e = (t[0] if len(t) == 1 else torch.cat(t) for t in (pix_l, pt_l, w_l))  # (E,)
     table = features if features.is_contiguous() else features.contiguous()
     if torch.is_grad_enabled() and features.requires_grad:
         with torch.no_grad():
+            pix_e, pt_e, w_e = _kept_entries(sp, w4f, inv, step, should_stop)
             pix_index, pix_offsets, pix_weights = _pixel_bags(pix_e, pt_e, w_e, 0, H * W)
             # Point-major bags for the gradient: the 4 corners of each surviving
             # point (weight 0 where not kept), none for culled points.
@@ -381,12 +377,77 @@ def rasterize_points(
             counts[sp.point] = 4
             pt_offsets = _offsets(counts)  # (N + 1,)
         out = _SparseSplat.apply(table, pix_index, pix_offsets, pix_weights, pt_index, pt_offsets, pt_weights)
+    elif sp.corner00 is not None and C <= CORNER_PATH_MAX_CHANNELS:
+        with torch.no_grad():
+            out = _accumulate_by_corner(sp, inv, table, W, H * W, step, should_stop)
     else:
-        out = _accumulate(pix_e, pt_e, w_e, table, H * W, step, should_stop)
+        with torch.no_grad():
+            pix_e, pt_e, w_e = _kept_entries(sp, w4f, inv, step, should_stop)
+            out = _accumulate(pix_e, pt_e, w_e, table, H * W, step, should_stop)
     image = out.view(H, W, C).permute(2, 0, 1)  # (C, H, W), channels-last memory
     hole = hole.view(H, W)
     depth = torch.where(hole, math.inf, sp.depth.to(features.dtype))
     return Fragments(image, wsum.view(H, W), depth, hole)
+
+
+def _kept_entries(sp: _Splats, w4f: torch.Tensor, inv: torch.Tensor, step: Optional[int],
+                  should_stop: Optional[Callable[[], bool]]):
+    """The kept corners, flat corner-major (cache friendly): pixel (E,) int64, feature row (E,) int32 and
+    weight normalised per pixel (E,) (0 at holes). int32 sorts and gathers faster; indices are < 2**28
+    (MAX_IMAGE_SIDE**2) and N < 2**31."""
+    M = sp.point.shape[0]
+    pix4 = sp.pixel.view(-1)
+    pt4 = sp.point.int().repeat(4)  # (4M,)
+    kept4 = sp.kept.view(-1)
+    pix_l, pt_l, w_l = [], [], []
+    for piece in _pieces(4 * M, step):
+        _check_stop(should_stop)
+        e = kept4[piece].nonzero().squeeze(1) + piece.start  # (e,) ascending
+        pix_c = pix4.index_select(0, e)
+        pix_l.append(pix_c)
+        pt_l.append(pt4.index_select(0, e))
+        w_l.append(w4f.index_select(0, e) * inv.index_select(0, pix_c))
+    return tuple(t[0] if len(t) == 1 else torch.cat(t) for t in (pix_l, pt_l, w_l))
+
+
+def _accumulate_by_corner(sp: _Splats, inv: torch.Tensor, table: torch.Tensor, W: int, n_pixels: int,
+                          step: Optional[int], should_stop: Optional[Callable[[], bool]]) -> torch.Tensor:
+    """(n_pixels, C) weighted feature sums at supersample 1 (inference only), with one sort of the M points.
+
+    The points are sorted (stably) by the output pixel of their corner 00; corner
+    (dy, dx) lands on that pixel + dy W + dx, so the same order is pixel-major
+    for every corner: four pixel-major bag lists from one sort of M keys (not
+    4M), summed per pixel. With ``step``, the pixels are done in bands (each a
+    slice of the four lists, ``should_stop`` checked before each); the bags are
+    the same, so the sums are identical.
+    """
+    _check_stop(should_stop)
+    order = torch.sort(sp.corner00.int(), stable=True).indices  # (M,)
+    o_sorted = sp.corner00.index_select(0, order)  # (M,) ascending
+    pt_sorted = sp.point.int().index_select(0, order)
+    lists = []
+    for c, off in enumerate((0, 1, W, W + 1)):
+        _check_stop(should_stop)
+        e = sp.kept[c].index_select(0, order).nonzero().squeeze(1)  # (e,) ascending
+        pix = o_sorted.index_select(0, e) + off  # (e,) ascending, in [0, n_pixels)
+        w = sp.weight[c].index_select(0, order).index_select(0, e).to(table.dtype) * inv.index_select(0, pix)
+        lists.append((pix, pt_sorted.index_select(0, e), w))
+    E = sum(int(p.shape[0]) for p, _, _ in lists)
+    n_bands = 1 if step is None else max(1, -(-E // step))
+    band_px = -(-n_pixels // n_bands) if n_pixels else 1
+    out = torch.empty(n_pixels, table.shape[1], dtype=table.dtype, device=table.device)
+    for lo in range(0, n_pixels, band_px):
+        hi = min(lo + band_px, n_pixels)
+        if n_bands > 1:
+            _check_stop(should_stop)
+        acc = None
+        for pix, idx, w in lists:
+            a, b = (int(v) for v in torch.searchsorted(pix, torch.tensor([lo, hi], device=pix.device)))
+            offsets = _offsets(torch.bincount(pix[a:b] - lo, minlength=hi - lo), torch.int32)
+            part = _bag_sum(idx[a:b], table, offsets, w[a:b])  # (hi - lo, C)
+            acc = part if acc is None else acc.add_(part)
+        out[lo:hi] = acc
+    return out
 
 
 def _pixel_bags(pix_e: torch.Tensor, pt_e: torch.Tensor, w_e: torch.Tensor, lo: int, hi: int):

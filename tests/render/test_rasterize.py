@@ -277,6 +277,18 @@ def test_matches_reference_forward_and_backward(supersample, seed):
     assert torch.allclose(feats_a.grad, feats_b.grad, atol=1e-12)
 
 
+@pytest.mark.parametrize("channels", [3, 20])
+def test_inference_matches_the_autograd_path(channels):
+    """Inference accumulates per corner (few channels) or in one sort; training through the autograd bags."""
+    pts, feats, K = random_scene(11, 13, 300, channels, seed=9)
+    settings = RasterSettings(11, 13)
+    with torch.inference_mode():
+        inf = rasterize_points(pts, feats, K, settings)
+    train = rasterize_points(pts, feats.clone().requires_grad_(True), K, settings)
+    assert torch.allclose(inf.image, train.image.detach(), atol=1e-12)
+    assert torch.equal(inf.hole, train.hole) and torch.equal(inf.weight, train.weight)
+
+
 def test_float32_matches_reference():
     H, W = 12, 10
     pts, feats, K = random_scene(H, W, 150, 3, seed=7, dtype=torch.float32)
@@ -294,9 +306,10 @@ def test_float32_matches_reference():
 @pytest.mark.parametrize("supersample", [1, 2])
 @pytest.mark.parametrize("chunk", [1, 7, 64, 1000])
 @pytest.mark.parametrize("dtype", [F64, torch.float32])
-def test_chunked_is_identical_to_one_shot_and_matches_reference(supersample, chunk, dtype):
+@pytest.mark.parametrize("channels", [5, 20])  # the per-corner path (<= 16 channels) and the one-sort path
+def test_chunked_is_identical_to_one_shot_and_matches_reference(supersample, chunk, dtype, channels):
     H, W = 13, 17
-    pts, feats, K = random_scene(H, W, 400, 5, seed=3, dtype=dtype)
+    pts, feats, K = random_scene(H, W, 400, channels, seed=3, dtype=dtype)
     settings = RasterSettings(H, W, supersample=supersample)
     calls = []
     with torch.inference_mode():
