@@ -8,7 +8,9 @@ the same density (75k x 64 -> 256^2, 300k x 64 -> 512^2, 1.2M x 64 -> 1024^2), u
 features), plus supersample=2 at 512^2, and the time per point relative to the
 smallest size (about 1.0 everywhere means linear scaling); then the push-pull
 hole filling of a 3-channel 512^2 frame. Target: 300k x 64 ->
-512^2 in <= 100 ms (inference) on the 2-core CPU.
+512^2 in <= 100 ms (inference) on the 2-core CPU. The last column is the
+interruptible inference (``should_stop=``, as the viewer's full frames): the
+same result in steps of ``CHUNK_POINTS`` points.
 
 The scenes look like a layered depth image seen from a slightly moved camera:
 ~85 % of the points are a jittered, wavy front surface in raster order (as the
@@ -82,12 +84,16 @@ def make_case(n: int, side: int, supersample: int, random_order: bool):
         with torch.inference_mode():
             rasterize_points(pts, feats, K, settings)
 
+    def chunked():  # as the viewer's full frames: interruptible, checked between chunks of points
+        with torch.inference_mode():
+            rasterize_points(pts, feats, K, settings, should_stop=lambda: False)
+
     def train():
         frag = rasterize_points(pts, feats_g, K, settings)
         frag.image.sum().backward()
         feats_g.grad = None
 
-    return infer, train
+    return infer, train, chunked
 
 
 def main() -> None:
@@ -101,27 +107,29 @@ def main() -> None:
     cases = [make_case(n, s, ss, args.random_order) for n, s, ss in specs]
     # Round-robin over the cases, so that a burst of load from other processes
     # spreads over all of them; two warm-up rounds (allocator, thread pool).
-    times = [([], []) for _ in cases]
+    times = [([], [], []) for _ in cases]
     for r in range(args.runs + 2):
-        for (infer, train), (t_inf, t_train) in zip(cases, times):
-            for fn, out in ((infer, t_inf), (train, t_train)):
+        for (infer, train, chunked), (t_inf, t_train, t_chunk) in zip(cases, times):
+            for fn, out in ((infer, t_inf), (train, t_train), (chunked, t_chunk)):
                 t = time.perf_counter()
                 fn()
                 if r >= 2:
                     out.append(1e3 * (time.perf_counter() - t))
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, C = {CHANNELS}, "
           f"{args.runs} runs, {'random' if args.random_order else 'LDI (raster)'} point order")
-    print(f"{'case':34s} {'inference ms':>16s} {'fwd+bwd ms':>16s} {'ns/pt':>6s} {'rel':>5s}")
-    print(f"{'':34s} {'median   min':>16s} {'median   min':>16s}")
+    print(f"{'case':34s} {'inference ms':>16s} {'fwd+bwd ms':>16s} {'ns/pt':>6s} {'rel':>5s} {'chunked ms':>16s}")
+    print(f"{'':34s} {'median   min':>16s} {'median   min':>16s} {'':12s} {'median   min':>16s}")
     base = None
-    for (n, side, ss), (t_inf, t_train) in zip(specs, times):
+    for (n, side, ss), (t_inf, t_train, t_chunk) in zip(specs, times):
         med = statistics.median(t_inf)
         per_pt = min(t_inf) * 1e6 / n
         base = base or per_pt
         label = f"{n // 1000}k x {CHANNELS} -> {side}^2" + (" (supersample 2)" if ss == 2 else "")
         print(f"{label:34s} {med:8.1f} {min(t_inf):7.1f} {statistics.median(t_train):8.1f} {min(t_train):7.1f}"
-              f" {per_pt:6.0f} {per_pt / base:5.2f}")
+              f" {per_pt:6.0f} {per_pt / base:5.2f} {statistics.median(t_chunk):8.1f} {min(t_chunk):7.1f}")
     print("ns/pt, rel: minimum inference time per point, and relative to the first row (1.0 = linear).")
+    print("chunked: inference with should_stop (the viewer's interruptible full frames: steps of "
+          "CHUNK_POINTS points, the same result).")
     print("On a machine shared with other jobs the minimum is the better estimate of the cost.")
 
     # Hole filling of a plain 3D photo frame (3 channels) rendered at 512^2.

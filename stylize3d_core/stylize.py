@@ -15,8 +15,10 @@ camera                 rasterize + U-Net decode                     see benchmar
 =====================  ==========================================  ==================
 
 Previews render a random subset of the points (about ``preview_points_per_pixel``
-per output pixel): the points are stored in a fixed random order, so a preview
-is a prefix of the arrays, not a copy.
+per output pixel, up to 1/8 more): the points are stored in a fixed
+:class:`~stylize3d_core.render.plain.StratifiedOrder`, so a preview is a prefix
+of the arrays, not a copy, and a full frame reads the features in nearly the
+photo's raster order (cache friendly).
 
 Thread use: an instance is not thread-safe; call it from one (worker) thread.
 """
@@ -38,7 +40,7 @@ from .models.checkpoint import Checkpoint, load_checkpoint
 from .models.style_features import StyleEncoder
 from .models.scene_geometry import SceneGeometry, prepare_geometry
 from .models.stylize3d import Stylize3DModel
-from .render.plain import preview_point_count, random_order
+from .render.plain import StratifiedOrder, preview_point_count
 from .scene.photo3d import Photo3D
 
 
@@ -118,8 +120,9 @@ class Stylized3DPhoto:
             t1 = time.perf_counter()
             self._content = self.model.encode(self._geom).float()  # (M, C), float32 even under an autocast
         t2 = time.perf_counter()
-        self._order = random_order(self._geom.xyz.shape[0], settings.seed)  # (N,)
-        self._xyz = self._geom.xyz.index_select(0, self._order).contiguous()  # (N, 3), random order
+        self._strata = StratifiedOrder(self._geom.xyz.shape[0], settings.seed)
+        self._order = self._strata.order  # (N,)
+        self._xyz = self._geom.xyz.index_select(0, self._order).contiguous()  # (N, 3), in self._order
         self._stylized: Optional[torch.Tensor] = None  # (M, C) at strength 1
         self._stylized2: Optional[torch.Tensor] = None  # (M, C) of the second style, at strength 1
         self._mix = 0.0
@@ -209,7 +212,8 @@ class Stylized3DPhoto:
         """One view (H, W, 3) float32 in [0, 1]; ``preview`` renders a point subset without supersampling.
 
         ``should_stop`` (any thread may make it return True) is checked between
-        the stages: before rasterizing, before each level of the decoder and
+        the stages: before rasterizing, between chunks of points while
+        rasterizing (:data:`~stylize3d_core.render.rasterize.CHUNK_POINTS`), before each level of the decoder and
         before its output layers; when it returns True the render stops with
         :class:`~stylize3d_core.errors.RenderInterrupted` (nothing is cached
         from a stopped render).
@@ -218,7 +222,7 @@ class Stylized3DPhoto:
             self._update_dense()
         n = self.num_points
         if preview:
-            keep = preview_point_count(n, height, width, self.settings.preview_points_per_pixel)
+            keep = self._strata.prefix(preview_point_count(n, height, width, self.settings.preview_points_per_pixel))
             ss = 1
         else:
             keep, ss = n, self.settings.supersample
@@ -228,7 +232,7 @@ class Stylized3DPhoto:
                 if should_stop is not None and should_stop():
                     raise RenderInterrupted("render stopped before rasterizing")
                 rgb, _ = self.model.render_view(self._dense[:keep], self._xyz[:keep], camera, height, width,
-                                                supersample=ss)
+                                                supersample=ss, should_stop=should_stop)
                 rgb = torch.nan_to_num(rgb.float(), nan=0.0).clamp_(0.0, 1.0)  # float32 after a bfloat16 autocast
         finally:
             for h in hooks:

@@ -77,7 +77,7 @@ def test_render_stops_between_stages_when_asked(stylized):
     with pytest.raises(RenderInterrupted):
         s.render(cam, 32, 48, should_stop=stop_after(0))
     assert len(calls) == 1
-    for n in (1, 3):  # stopped inside the decoder
+    for n in (1, 3):  # stopped inside the rasterizer or the decoder
         calls.clear()
         with pytest.raises(RenderInterrupted):
             s.render(cam, 32, 48, should_stop=stop_after(n))
@@ -109,3 +109,70 @@ def test_mixing_two_styles_blends_the_stylizer_outputs(stylized):
         stylized.set_mix(1.5)
     stylized.set_second_style(None)
     assert np.allclose(stylized.render(cam, 48, 64), only_a, atol=1e-6)
+
+
+def test_render_stops_inside_the_rasterizer_between_chunks(stylized, monkeypatch):
+    """With small chunks, a stop that comes while rasterizing is honoured there (not after it),
+    and a render that is not stopped is the same frame as the one-shot rasterization's."""
+    from stylize3d_core.errors import RenderInterrupted
+    from stylize3d_core.render import rasterize
+
+    s = stylized
+    cam = Cameras.identity(s.photo.fov_y_deg)
+    one_shot = s.render(cam, 32, 48)
+    monkeypatch.setattr(rasterize, "CHUNK_POINTS", 256)  # the cloud has ~3500 points: > 10 chunks
+    calls = []
+    chunked = s.render(cam, 32, 48, should_stop=lambda: calls.append(1) and False)
+    assert np.array_equal(chunked, one_shot)
+    n_decoder = len(s.model.decoder.skips) + len(s.model.decoder.downs) + len(s.model.decoder.ups) + 2
+    assert len(calls) - 1 - n_decoder > 2 * (s.num_points // 256)  # two passes over the chunks, at least
+    for n in (2, 5, 9):
+        calls.clear()
+
+        def stop():
+            calls.append(1)
+            return len(calls) > n
+
+        with pytest.raises(RenderInterrupted, match="rasteriz"):
+            s.render(cam, 32, 48, should_stop=stop)
+        assert len(calls) == n + 1
+
+
+def test_plain_renderer_stops_between_chunks_and_is_unchanged(stylized, monkeypatch):
+    from stylize3d_core.errors import RenderInterrupted
+    from stylize3d_core.render import rasterize
+    from stylize3d_core.render.plain import PlainRenderer
+
+    plain = PlainRenderer(stylized.photo.points)
+    cam = Cameras.identity(stylized.photo.fov_y_deg)
+    one_shot = plain.render(cam, 32, 48)
+    monkeypatch.setattr(rasterize, "CHUNK_POINTS", 256)
+    assert np.array_equal(plain.render(cam, 32, 48, should_stop=lambda: False), one_shot)
+    calls = []
+
+    def stop():
+        calls.append(1)
+        return len(calls) > 4
+
+    with pytest.raises(RenderInterrupted, match="rasteriz"):
+        plain.render(cam, 32, 48, should_stop=stop)
+    assert len(calls) == 5
+
+
+def test_plain_renderer_grown_splats_chunked_are_unchanged(stylized, monkeypatch):
+    """Magnified (grown splats, soft edges) full frames and previews: chunked == one shot, to the bit."""
+    from stylize3d_core.render import rasterize
+    from stylize3d_core.render.plain import PlainRenderer
+
+    plain = PlainRenderer(stylized.photo.points)
+    assert plain._size is not None  # a PointCloud: splats grow with magnification
+    cam = Cameras.identity(stylized.photo.fov_y_deg / 3.0)  # 3x zoom: splats of several tap counts
+    for preview in (False, True):
+        one_shot = plain.rasterize(cam, 32, 48, preview=preview)
+        image = plain.render(cam, 32, 48, preview=preview)
+        monkeypatch.setattr(rasterize, "CHUNK_POINTS", 256)
+        chunked = plain.rasterize(cam, 32, 48, preview=preview, should_stop=lambda: False)
+        for a, b in zip(one_shot, chunked):
+            assert torch.equal(a, b)
+        assert np.array_equal(plain.render(cam, 32, 48, preview=preview, should_stop=lambda: False), image)
+        monkeypatch.undo()

@@ -238,8 +238,9 @@ class ViewerSession:
                should_stop: Optional[Callable[[], bool]] = None) -> np.ndarray:
         """One view (H, W, 3) float32 in [0, 1]: through the model when ``stylized`` and available.
 
-        ``should_stop`` is checked between stages; once it returns True the render
-        raises :class:`~stylize3d_core.errors.RenderInterrupted`.
+        ``should_stop`` is checked between stages and between chunks of points
+        while rasterizing; once it returns True the render raises
+        :class:`~stylize3d_core.errors.RenderInterrupted`.
         """
         if self.photo is None:
             raise InputError("photo", "open a photo first")
@@ -247,7 +248,7 @@ class ViewerSession:
             return self._stylized.render(camera, height, width, preview=preview, should_stop=should_stop)
         if should_stop is not None and should_stop():
             raise RenderInterrupted("render stopped before rasterizing")
-        return self._plain.render(camera, height, width, preview=preview)
+        return self._plain.render(camera, height, width, preview=preview, should_stop=should_stop)
 
     def render_view(self, camera: Cameras, size: Tuple[int, int], display_hw: Tuple[int, int], *,
                     preview: bool, stylized: bool, should_stop: Optional[Callable[[], bool]] = None,

@@ -24,7 +24,7 @@ features reach every point through the 3-NN upsampling.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal, Sequence, Tuple
+from typing import Callable, Literal, Optional, Sequence, Tuple
 
 import torch
 from torch import nn
@@ -142,14 +142,16 @@ class Stylize3DModel(nn.Module):
 
     def render_view(
         self, dense: torch.Tensor, xyz: torch.Tensor, camera: Cameras, height: int, width: int,
-        supersample: int = 1,
+        supersample: int = 1, should_stop: Optional[Callable[[], bool]] = None,
     ) -> Tuple[torch.Tensor, Fragments]:
         """Decode one view: (3, H, W) RGB in (0, 1) and the rasterizer's fragments.
 
         For a fast preview pass a subset of the points (see ``Stylized3DPhoto``).
+        ``should_stop`` is checked between the rasterizer's chunks of points (True
+        stops with :class:`~stylize3d_core.errors.RenderInterrupted`).
         """
         settings = RasterSettings(height=int(height), width=int(width), supersample=supersample)
-        frags = PointRasterizer(settings)(xyz, dense, camera)
+        frags = PointRasterizer(settings)(xyz, dense, camera, should_stop=should_stop)
         features = frags.image.unsqueeze(0)  # (1, Cr, H, W)
         mask = (~frags.hole).to(features.dtype)[None, None]  # (1, 1, H, W)
         rgb = self.decoder(features, mask)[0]  # (3, H, W)

@@ -4,22 +4,24 @@ The stylized path decodes rasterized features with the model's U-Net instead;
 this path shows the photo's own colours and is the baseline the stylization is
 compared with.
 
-Previews (both paths) rasterize a *prefix* of the points held in a fixed random
-order, i.e. a uniform random subset of :func:`preview_point_count` points, with
-no copy; the hole filling (plain) or the decoder (stylized) closes the gaps.
+Previews (both paths) rasterize a *prefix* of the points held in a fixed
+:class:`StratifiedOrder`, i.e. a uniform random subset of (up to 1/8 more
+than) :func:`preview_point_count` points, with no copy; the hole filling
+(plain) or the decoder (stylized) closes the gaps.
 """
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass
-from typing import Iterator, Optional, Tuple, Union
+from typing import Callable, Iterator, List, Optional, Tuple, Union
 
 import numpy as np
 import torch
 
 from ..checks import check_range
-from ..errors import InputError
+from ..errors import InputError, RenderInterrupted
 from ..geometry.camera import Cameras, focal_from_fov
 from ..scene.pointcloud import PointCloud, PointTensors
 from .holes import fill_holes
@@ -78,6 +80,49 @@ def random_order(n_points: int, seed: int) -> torch.Tensor:
     return torch.randperm(int(n_points), generator=torch.Generator().manual_seed(int(seed)))
 
 
+PREVIEW_LEVEL_GROWTH = 1.125
+"""Each level of a :class:`StratifiedOrder` holds 1/8 as many points as all the levels before it."""
+
+
+class StratifiedOrder:
+    """A point order whose level prefixes are uniform random subsets and whose levels are in memory order.
+
+    A random permutation cut into levels at ``bounds`` (0, 1024, 1152, 1296, ...:
+    each level 1/8 of the points before it, the last ending at N); inside each
+    level the points keep their original order (the LDI's raster order), so a
+    rasterizer reading their features pixel by pixel touches nearby memory
+    (about 1.7x faster than a fully random order for a 1 MP photo at 512 px).
+    A prefix that ends at a level boundary is a uniform random subset:
+    previews take :meth:`prefix` points, the smallest boundary at or above the
+    count they ask for (at most 1/8 more).
+
+    Attributes:
+        order: (N,) int64 permutation (new position -> original index).
+        bounds: the level boundaries, ascending, from 0 to N.
+    """
+
+    def __init__(self, n_points: int, seed: int, first: int = PREVIEW_MIN_POINTS,
+                 growth: float = PREVIEW_LEVEL_GROWTH) -> None:
+        n = int(n_points)
+        perm = random_order(n, seed)
+        bounds, b = [0], min(n, int(first))
+        while True:
+            bounds.append(b)
+            if b >= n:
+                break
+            b = min(n, max(b + 1, math.ceil(b * growth)))
+        if n == 0:
+            bounds = [0]
+        self.bounds: List[int] = bounds
+        levels = [perm[lo:hi].sort().values for lo, hi in zip(bounds[:-1], bounds[1:])]
+        self.order = torch.cat(levels) if levels else perm
+
+    def prefix(self, count: int) -> int:
+        """The smallest level boundary >= ``count`` (N if count > N)."""
+        i = bisect.bisect_left(self.bounds, int(count))
+        return self.bounds[min(i, len(self.bounds) - 1)]
+
+
 def frame_size(photo_size: Tuple[int, int], long_side: int, *, even: bool = True) -> Tuple[int, int]:
     """(H, W) of output frames whose long side is ``long_side`` and aspect is the photo's.
 
@@ -98,7 +143,7 @@ def frame_size(photo_size: Tuple[int, int], long_side: int, *, even: bool = True
 
 class PlainRenderer:
     """Renders a point cloud's colours from any camera. Holds the points as tensors,
-    in a fixed random order (see the module docstring on previews).
+    in a fixed :class:`StratifiedOrder` (see the module docstring on previews).
 
     Runs on whatever thread calls it (torch releases the GIL in its kernels).
     """
@@ -106,7 +151,8 @@ class PlainRenderer:
     def __init__(self, points: Union[PointCloud, PointTensors],
                  settings: PlainRenderSettings = PlainRenderSettings()) -> None:
         t = points if isinstance(points, PointTensors) else points.to_tensors()
-        order = random_order(t.xyz.shape[0], settings.seed)
+        self._strata = StratifiedOrder(t.xyz.shape[0], settings.seed)
+        order = self._strata.order
         self._xyz = t.xyz.index_select(0, order)  # (N, 3)
         self._rgb = t.rgb.index_select(0, order)  # (N, 3)
         self._size: Optional[torch.Tensor] = None  # (N,) footprint of each point, scene units
@@ -119,13 +165,18 @@ class PlainRenderer:
     def num_points(self) -> int:
         return int(self._xyz.shape[0])
 
-    def rasterize(self, camera: Cameras, height: int, width: int, *, preview: bool = False) -> Fragments:
+    def rasterize(self, camera: Cameras, height: int, width: int, *, preview: bool = False,
+                  should_stop: Optional[Callable[[], bool]] = None) -> Fragments:
         """The point colours rasterized by the single camera ``camera`` before hole filling
         (``Fragments.hole`` marks the pixels no point covered); ``preview`` rasterizes only
-        :func:`preview_point_count` of the points."""
+        a :meth:`StratifiedOrder.prefix` of :func:`preview_point_count` of the points.
+
+        ``should_stop`` is checked between chunks of points; True stops with
+        :class:`~stylize3d_core.errors.RenderInterrupted`."""
         keep = self.num_points
         if preview:
-            keep = preview_point_count(keep, height, width, self.settings.preview_points_per_pixel)
+            keep = self._strata.prefix(preview_point_count(keep, height, width,
+                                                           self.settings.preview_points_per_pixel))
         raster = RasterSettings(
             height=int(height), width=int(width),
             depth_tolerance=self.settings.depth_tolerance, supersample=self.settings.supersample,
@@ -135,12 +186,20 @@ class PlainRenderer:
         if self._size is not None:
             size = self._size[:keep] * math.sqrt(self.num_points / max(keep, 1))
         with torch.inference_mode():
-            return PointRasterizer(raster)(self._xyz[:keep], self._rgb[:keep], camera, size)
+            return PointRasterizer(raster)(self._xyz[:keep], self._rgb[:keep], camera, size,
+                                           should_stop=should_stop)
 
-    def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False) -> np.ndarray:
+    def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False,
+               should_stop: Optional[Callable[[], bool]] = None) -> np.ndarray:
         """One frame (H, W, 3) float32 in [0, 1] seen by the single camera ``camera``: the
-        :meth:`rasterize` result with its holes filled."""
-        frags = self.rasterize(camera, height, width, preview=preview)
+        :meth:`rasterize` result with its holes filled.
+
+        ``should_stop`` is checked between chunks of points while rasterizing and
+        before the hole filling; True stops with
+        :class:`~stylize3d_core.errors.RenderInterrupted`."""
+        frags = self.rasterize(camera, height, width, preview=preview, should_stop=should_stop)
+        if should_stop is not None and should_stop():
+            raise RenderInterrupted("render stopped before filling holes")
         with torch.inference_mode():
             image = fill_holes(frags.image, frags.hole).clamp_(0.0, 1.0)  # (3, H, W), never NaN
         return image.permute(1, 2, 0).contiguous().numpy()

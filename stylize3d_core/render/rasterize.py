@@ -52,6 +52,17 @@ pre-normalised weights times the features, computed by ``embedding_bag`` (one
 bag of point indices per pixel), which never materialises a (4N, C) tensor. Its
 gradient is the transposed matrix, again an ``embedding_bag`` (one bag of pixel
 indices per point). Cost is linear in N and H*W.
+
+Interruptible rasterization (``should_stop=``, e.g. the viewer's full frames):
+the work runs in steps of about ``chunk_points`` points (default
+:data:`CHUNK_POINTS`), with the check before each: culling, splatting and the
+z-buffer (and, with ``soft_edges``, the core z-buffer) per chunk of points,
+then the kept test per chunk, the weight sums in order, and the feature
+accumulation in bands of consecutive pixels (each bag keeps its entries and
+their order). A point's taps and weights come from its own position and
+footprint alone, and the entries are laid out in the same order at any chunk
+size (by tap count, then tap, then point), so the result is identical, to the
+bit, to the one-shot rasterization, grown splats included.
 """
 
 from __future__ import annotations
@@ -59,14 +70,15 @@ from __future__ import annotations
 import math
 import numbers
 from dataclasses import dataclass
-from typing import NamedTuple, Optional
+from typing import Callable, Dict, List, NamedTuple, Optional
 
 import torch
 import torch.nn.functional as F
 
 from ..checks import check_range, check_shape
-from ..errors import InputError
+from ..errors import InputError, RenderInterrupted
 from ..geometry.camera import project
+
 
 MAX_IMAGE_SIDE = 16384
 """Largest image height or width accepted (before supersampling)."""
@@ -160,17 +172,21 @@ MAX_SPLAT_SCALE = 4.0
 class _Splats(NamedTuple):
     """The tap contributions of the M points that survive culling, as flat (E,) entries.
 
-    With one tap count for every point (``taps`` > 0, always so without point sizes),
-    the entries are tap-major: entry ``t * M + m`` is tap ``t`` of surviving point ``m``.
+    Entries are grouped by tap count (ascending), and within a group tap-major:
+    with one tap count for every point (``taps`` > 0, always so without point
+    sizes), entry ``t * M + m`` is tap ``t`` of surviving point ``m``. The layout
+    does not depend on the chunking of the points.
     """
 
-    point: torch.Tensor  # (M,) int64 index of each surviving point into the features
+    point: torch.Tensor  # (M,) int64 index of each surviving point into the features, ascending
     entry_point: torch.Tensor  # (E,) int64 feature row of each entry
     pixel: torch.Tensor  # (E,) int64 output pixel i * W + j of each entry, 0 where not kept
     weight: torch.Tensor  # (E,) splat weight of each entry, 0 where not kept
     kept: torch.Tensor  # (E,) bool, the entry survived the z-buffer test
     depth: torch.Tensor  # (H, W) front-most depth, +inf where nothing landed
     taps: int  # taps per point when uniform, else 0
+    corner00: Optional[torch.Tensor] = None  # (M,) int64 output pixel of corner 00 (unmasked), bilinear 4-tap
+    # splats at supersample 1 only
 
 
 def _check_inputs(points_cam: torch.Tensor, features: torch.Tensor, K: torch.Tensor, settings,
@@ -208,72 +224,111 @@ def _check_inputs(points_cam: torch.Tensor, features: torch.Tensor, K: torch.Ten
             raise InputError("features", "contains NaN or infinite values")
 
 
+def _check_stop(should_stop: Optional[Callable[[], bool]]) -> None:
+    if should_stop is not None and should_stop():
+        raise RenderInterrupted("render stopped while rasterizing")
+
+
+def _pieces(n: int, step: Optional[int]) -> List[slice]:
+    """Consecutive slices covering range(n), ``step`` long (one slice if None); one empty slice if n == 0."""
+    if step is None or n <= step:
+        return [slice(0, n)]
+    return [slice(i, min(i + step, n)) for i in range(0, n, step)]
+
+
+def _row_sum(t: torch.Tensor) -> torch.Tensor:
+    """(1, m): the sum of the rows of (k, m) ``t``, added in row order, column by column."""
+    total = t[0].clone()
+    for k in range(1, t.shape[0]):
+        total += t[k]
+    return total[None]
+
+
 @torch.no_grad()
-def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, point_size=None) -> _Splats:
+def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, point_size=None,
+           should_stop: Optional[Callable[[], bool]] = None, chunk: Optional[int] = None) -> _Splats:
     """Cull, splat and z-buffer: everything but the feature accumulation.
 
-    Per-tap arrays are (T, M) per group of points with the same tap count
+    Per-tap arrays are (T, m) per group of points with the same tap count
     (rows are taps): element-wise work on contiguous rows is several times
-    faster than on (M, T).
+    faster than on (m, T).
+
+    With ``chunk``, the points are processed ``chunk`` at a time (``should_stop``
+    checked before each): a point's taps depend on that point alone and the
+    z-buffers are a min, so the result is the same; the chunks' groups are
+    joined in point order, which gives the one-shot layout.
     """
     s = settings.supersample
     H, W = settings.height, settings.width
     Hs, Ws = H * s, W * s  # raster (sub-pixel) size
     dtype = points_cam.dtype if points_cam.dtype == torch.float64 else torch.float32
     dev = points_cam.device
-    pts = points_cam.detach().to(dtype)
     Ks = K.detach().to(device=dev, dtype=dtype).clone()
     Ks[:2] *= s  # (3, 3) intrinsics of the sub-pixel raster
-    uv, z = project(pts, Ks)  # (N, 2), (N,)
-    a, b = uv[:, 0] - 0.5, uv[:, 1] - 0.5  # (N,) integers at pixel centres
-    if point_size is None:
-        half = torch.ones_like(z)  # (N,) splat half-width in raster pixels: bilinear
-    else:
-        size = point_size.detach().to(device=dev, dtype=dtype)
-        # the footprint in *output* pixels: with supersampling, the bilinear sub-pixel splats
-        # already cover a point spacing of s sub-pixels (pooling and visibility splatting)
-        half = (K[0, 0].abs().to(dtype) * size / z.abs().clamp_min(1e-12)).nan_to_num(1.0)
-        half = torch.where(half < _GROWN, 1.0, half.clamp(max=MAX_SPLAT_SCALE))  # ~1 stays bilinear
-    # NaN fails every comparison; an infinite x or y gives an infinite a or b.
-    inside = (z > settings.near_clip) & (z < math.inf) & (a > -half) & (a < Ws - 1 + half)
-    inside &= (b > -half) & (b < Hs - 1 + half)
-    idx = inside.nonzero().squeeze(1)  # (M,) surviving points, ascending
-    a, b, z, half = (t.index_select(0, idx) for t in (a, b, z, half))  # (M,)
-    reach = half.ceil().long()  # (M,) taps per side of the point, per axis
-    groups = [None] if point_size is None else [int(r) for r in torch.unique(reach).tolist()]
-
-    # Per group: taps, weights and raster indices (flat, unpadded; outside taps have weight 0).
-    parts = []
-    for r in groups:
-        sel = None if r is None else (reach == r).nonzero().squeeze(1)  # (Mg,) into the survivors
-        r = 1 if r is None else r
-        ag, bg_, zg, hg = (t if sel is None else t.index_select(0, sel) for t in (a, b, z, half))
-        x0f, y0f = ag.floor(), bg_.floor()
-        offs = torch.arange(1 - r, r + 1, device=dev, dtype=dtype)  # (2r,) tap offsets per axis
-        xs, ys = x0f + offs[:, None], y0f + offs[:, None]  # (2r, Mg)
-        wx = (1.0 - (xs - ag).abs() / hg).clamp_min(0.0)  # (2r, Mg) tent of half-width hg
-        wy = (1.0 - (ys - bg_).abs() / hg).clamp_min(0.0)
-        if r > 1:  # every point deposits a total weight of 1 (the bilinear weights already do)
-            wx = wx / wx.sum(0, keepdim=True)
-            wy = wy / wy.sum(0, keepdim=True)
-        T, Mg = 4 * r * r, ag.shape[0]
-        w = (wy[:, None] * wx[None]).reshape(T, Mg)  # (T, Mg), row = dy * 2r + dx
-        xi = xs.long()[None].expand(2 * r, -1, -1).reshape(T, Mg)  # (T, Mg)
-        yi = ys.long()[:, None].expand(-1, 2 * r, -1).reshape(T, Mg)
-        ok = (w > 0) & (xi >= 0) & (xi < Ws) & (yi >= 0) & (yi < Hs)
-        q = torch.where(ok, yi * Ws + xi, 0)  # (T, Mg) raster index
-        parts.append((sel, w, ok, q, xi, yi, zg))
-
+    soft = settings.soft_edges
     zbuf = torch.full((Hs * Ws,), math.inf, dtype=dtype, device=dev)
-    zcore = torch.full((Hs * Ws,), math.inf, dtype=dtype, device=dev) if settings.soft_edges else zbuf
-    for sel, w, ok, q, _, _, zg in parts:
-        zbuf.scatter_reduce_(0, q.reshape(-1), torch.where(ok, zg, math.inf).reshape(-1), reduce="amin")
-        if settings.soft_edges:
-            hg = half if sel is None else half.index_select(0, sel)
-            core = ok & ((w >= CORE_WEIGHT / (hg * hg)) | (hg == 1.0))  # (T, Mg): bilinear taps all are
-            zcore.scatter_reduce_(0, q.reshape(-1), torch.where(core, zg, math.inf).reshape(-1), reduce="amin")
-    front_buf = torch.where(zcore < math.inf, zcore, zbuf) if settings.soft_edges else zbuf
+    zcore = torch.full((Hs * Ws,), math.inf, dtype=dtype, device=dev) if soft else zbuf
+
+    chunks: List[Dict[int, tuple]] = []  # per chunk: reach -> (rows, w, ok, q, o, zg, c00)
+    survivors = []
+    for piece in _pieces(points_cam.shape[0], chunk):
+        _check_stop(should_stop)
+        pts = points_cam[piece].detach().to(dtype)
+        uv, z = project(pts, Ks)  # (n, 2), (n,)
+        a, b = uv[:, 0] - 0.5, uv[:, 1] - 0.5  # (n,) integers at pixel centres
+        if point_size is None:
+            half = torch.ones_like(z)  # (n,) splat half-width in raster pixels: bilinear
+        else:
+            size = point_size[piece].detach().to(device=dev, dtype=dtype)
+            # the footprint in *output* pixels: with supersampling, the bilinear sub-pixel splats
+            # already cover a point spacing of s sub-pixels (pooling and visibility splatting)
+            half = (K[0, 0].detach().abs().to(dtype) * size / z.abs().clamp_min(1e-12)).nan_to_num(1.0)
+            half = torch.where(half < _GROWN, 1.0, half.clamp(max=MAX_SPLAT_SCALE))  # ~1 stays bilinear
+        # NaN fails every comparison; an infinite x or y gives an infinite a or b.
+        inside = (z > settings.near_clip) & (z < math.inf) & (a > -half) & (a < Ws - 1 + half)
+        inside &= (b > -half) & (b < Hs - 1 + half)
+        idx = inside.nonzero().squeeze(1)  # (m,) surviving points of the chunk, ascending
+        a, b, z, half = (t.index_select(0, idx) for t in (a, b, z, half))  # (m,)
+        idx = idx + piece.start  # (m,) into the features
+        survivors.append(idx)
+        reach = half.ceil().long()  # (m,) taps per side of the point, per axis
+        groups = [None] if point_size is None else [int(r) for r in torch.unique(reach).tolist()]
+
+        # Per group: taps, weights and raster indices (flat, unpadded; outside taps have weight 0).
+        parts = {}
+        for r in groups:
+            sel = None if r is None else (reach == r).nonzero().squeeze(1)  # (mg,) into the survivors
+            r = 1 if r is None else r
+            ag, bg_, zg, hg = (t if sel is None else t.index_select(0, sel) for t in (a, b, z, half))
+            x0f, y0f = ag.floor(), bg_.floor()
+            offs = torch.arange(1 - r, r + 1, device=dev, dtype=dtype)  # (2r,) tap offsets per axis
+            xs, ys = x0f + offs[:, None], y0f + offs[:, None]  # (2r, mg)
+            wx = (1.0 - (xs - ag).abs() / hg).clamp_min(0.0)  # (2r, mg) tent of half-width hg
+            wy = (1.0 - (ys - bg_).abs() / hg).clamp_min(0.0)
+            if r > 1:  # every point deposits a total weight of 1 (the bilinear weights already do)
+                # summed row by row (element-wise, in a fixed order): a reduction kernel's order can
+                # depend on the number of points, and the result must not depend on the chunking
+                wx = wx / _row_sum(wx)
+                wy = wy / _row_sum(wy)
+            T, mg = 4 * r * r, ag.shape[0]
+            w = (wy[:, None] * wx[None]).reshape(T, mg)  # (T, mg), row = dy * 2r + dx
+            xi = xs.long()[None].expand(2 * r, -1, -1).reshape(T, mg)  # (T, mg)
+            yi = ys.long()[:, None].expand(-1, 2 * r, -1).reshape(T, mg)
+            ok = (w > 0) & (xi >= 0) & (xi < Ws) & (yi >= 0) & (yi < Hs)
+            q = torch.where(ok, yi * Ws + xi, 0)  # (T, mg) raster index
+            o = yi * W + xi if s == 1 else (yi >> 1) * W + (xi >> 1)  # (T, mg) output pixel of each tap
+            zbuf.scatter_reduce_(0, q.reshape(-1), torch.where(ok, zg, math.inf).reshape(-1), reduce="amin")
+            if soft:
+                core = ok & ((w >= CORE_WEIGHT / (hg * hg)) | (hg == 1.0))  # (T, mg): bilinear taps all are
+                zcore.scatter_reduce_(0, q.reshape(-1), torch.where(core, zg, math.inf).reshape(-1), reduce="amin")
+            rows = idx if sel is None else idx.index_select(0, sel)
+            c00 = o[0] if (r == 1 and s == 1) else None  # (mg,) corner 00 = y0 * W + x0, unmasked
+            parts[r] = (rows, w, ok, q, o, zg, c00)
+        chunks.append(parts)
+
+    front_buf = torch.where(zcore < math.inf, zcore, zbuf) if soft else zbuf
     if s == 2:
+        _check_stop(should_stop)
         # Visibility splatting: a sub-pixel's front is the nearest depth in its 3 x 3
         # neighbourhood, so a surface behind cannot show through the gaps between
         # the 2 x 2 splats of a front surface (they are 2 sub-pixels apart).
@@ -281,27 +336,43 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
     else:
         near = front_buf
 
+    tested: Dict[int, list] = {}  # reach -> per chunk (rows, pixel, weight, kept, c00), in point order
+    for parts in chunks:
+        if len(chunks) > 1:
+            _check_stop(should_stop)
+        for r, (rows, w, ok, q, o, zg, c00) in parts.items():
+            front = near.index_select(0, q.reshape(-1)).view_as(q)  # (T, mg)
+            keep = (zg <= front * (1.0 + settings.depth_tolerance)) & ok  # (T, mg)
+            if soft:  # a nearer surface's fringe gives way to the core-set front
+                keep &= zg * (1.0 + settings.depth_tolerance) >= front
+            tested.setdefault(r, []).append((rows, torch.where(keep, o, 0), torch.where(keep, w, 0.0), keep, c00))
+
+    # Join the chunks per group (along the points, which keeps them ascending), groups by tap count:
+    # the same layout as one chunk.
+    cat1 = (lambda xs, dim=0: xs[0] if len(xs) == 1 else torch.cat(xs, dim))
     entry_point, pixel, weight, kept = [], [], [], []
-    for sel, w, ok, q, xi, yi, zg in parts:
-        front = near.index_select(0, q.reshape(-1)).view_as(q)  # (T, Mg)
-        keep = (zg <= front * (1.0 + settings.depth_tolerance)) & ok  # (T, Mg)
-        if settings.soft_edges:  # a nearer surface's fringe gives way to the core-set front
-            keep &= zg * (1.0 + settings.depth_tolerance) >= front
-        o = yi * W + xi if s == 1 else (yi >> 1) * W + (xi >> 1)  # output pixel of each tap
-        pixel.append(torch.where(keep, o, 0).reshape(-1))
-        weight.append(torch.where(keep, w, 0.0).reshape(-1))
-        kept.append(keep.reshape(-1))
-        rows = idx if sel is None else idx.index_select(0, sel)
-        entry_point.append(rows.repeat(w.shape[0]))  # tap-major, as the (T, Mg) rows
+    for r in sorted(tested):
+        pieces = tested[r]
+        rows = cat1([p[0] for p in pieces])  # (Mg,)
+        T = pieces[0][1].shape[0]
+        pixel.append(cat1([p[1] for p in pieces], 1).reshape(-1))
+        weight.append(cat1([p[2] for p in pieces], 1).reshape(-1))
+        kept.append(cat1([p[3] for p in pieces], 1).reshape(-1))
+        entry_point.append(rows.repeat(T))  # tap-major, as the (T, Mg) rows
     depth = zbuf.view(Hs, Ws)
     if s == 2:
         depth = depth.reshape(H, 2, W, 2).amin(dim=(1, 3))
-    taps = parts[0][1].shape[0] if len(parts) == 1 else 0
-    if len(parts) == 0:
+    taps = tested[next(iter(tested))][0][1].shape[0] if len(tested) == 1 else 0
+    if len(tested) == 0:
         taps = 4
+    c00 = None
+    if s == 1 and list(tested) == [1]:
+        c00 = cat1([p[4] for p in tested[1]])
+    elif s == 1 and len(tested) == 0:
+        c00 = torch.zeros(0, dtype=torch.long, device=dev)
     cat = (lambda xs, like: torch.cat(xs) if xs else torch.zeros(0, dtype=like, device=dev))
-    return _Splats(idx, cat(entry_point, torch.long), cat(pixel, torch.long), cat(weight, dtype),
-                   cat(kept, torch.bool), depth.clone(), taps)
+    return _Splats(cat1(survivors), cat(entry_point, torch.long), cat(pixel, torch.long), cat(weight, dtype),
+                   cat(kept, torch.bool), depth.clone(), taps, c00)
 
 
 def _bag_sum(index: torch.Tensor, table: torch.Tensor, offsets: torch.Tensor, weights: torch.Tensor):
@@ -332,9 +403,19 @@ def _offsets(counts: torch.Tensor, dtype: torch.dtype = torch.long) -> torch.Ten
     return out
 
 
+CORNER_PATH_MAX_CHANNELS = 16
+"""At supersample 1, inference with at most this many channels (the plain renderer's colours) accumulates
+per corner after one sort of the points (:func:`_accumulate_by_corner`); wider features (the model's) are
+faster with one sort of all the kept corners, which reads each feature row once per pixel."""
+
+CHUNK_POINTS = 1 << 18
+"""Points per step of an interruptible rasterization (``should_stop`` given): ~30-40 ms each on one CPU core."""
+
+
 def rasterize_points(
     points_cam: torch.Tensor, features: torch.Tensor, K: torch.Tensor, settings: RasterSettings,
-    point_size: Optional[torch.Tensor] = None,
+    point_size: Optional[torch.Tensor] = None, *,
+    should_stop: Optional[Callable[[], bool]] = None, chunk_points: Optional[int] = None,
 ) -> Fragments:
     """Rasterize points with features into an image (see the module docstring).
 
@@ -348,41 +429,52 @@ def rasterize_points(
         point_size: optional (N,) footprint of each point, in scene units at its depth
             (e.g. ``z / f`` for a point per photo pixel): its splat grows with the
             magnification (see the module docstring). None: bilinear splats.
+        should_stop: checked between steps of about ``chunk_points`` points (or
+            entries); once it returns True the call raises
+            :class:`~stylize3d_core.errors.RenderInterrupted`.
+        chunk_points: points per step (default :data:`CHUNK_POINTS` with
+            ``should_stop``, else all at once). The result is the same, to the
+            bit, at any chunk size: a point's splat depends on that point alone,
+            the z-buffers are a min, the weight sums are added in the same order,
+            and the feature accumulation runs in bands of pixels whose bags hold
+            the same entries in the same order.
     Returns:
         :class:`Fragments` ``image (C, H, W), weight (H, W), depth (H, W), hole (H, W)``.
     Raises:
-        InputError: on a wrong shape or dtype, a non-finite K or features.
+        InputError: on a wrong shape or dtype, a non-finite K or features, a chunk_points < 1.
+        RenderInterrupted: ``should_stop()`` returned True.
     """
     _check_inputs(points_cam, features, K, settings, point_size)
+    if chunk_points is None and should_stop is not None:
+        chunk_points = CHUNK_POINTS
+    if chunk_points is not None:
+        if isinstance(chunk_points, bool) or not isinstance(chunk_points, numbers.Integral) or chunk_points < 1:
+            raise InputError("chunk_points", f"must be a positive integer, got {chunk_points!r}")
+        chunk_points = int(chunk_points)
     H, W = settings.height, settings.width
     C = features.shape[1]
     N = points_cam.shape[0]
-    sp = _splat(points_cam, K, settings, point_size)
+    sp = _splat(points_cam, K, settings, point_size, should_stop, chunk_points)
     M = sp.point.shape[0]
+    E = sp.pixel.shape[0]
+    step = None if chunk_points is None else 4 * chunk_points  # entries per step
     with torch.no_grad():
         w_all = sp.weight.to(features.dtype)  # (E,)
         pix = sp.pixel  # (E,)
         wsum = torch.zeros(H * W, dtype=features.dtype, device=features.device)
-        wsum.index_add_(0, pix, w_all)  # (HW,)
+        for piece in _pieces(E, step):  # in order: the same sums as one index_add_
+            _check_stop(should_stop)
+            wsum.index_add_(0, pix[piece], w_all[piece])  # (HW,)
         hole = wsum < settings.hole_weight_threshold  # (HW,)
         inv = torch.where(hole, 0.0, 1.0 / wsum.clamp_min(settings.hole_weight_threshold))  # (HW,)
-        nw = w_all * inv.index_select(0, pix)  # (E,) weights normalised per pixel, 0 at holes
-        # Pixel-major bags of the kept entries: gather in tap-major order (cache
-        # friendly), then permute once by pixel. int32 sorts and gathers faster;
-        # indices are < 2**28 (MAX_IMAGE_SIDE**2) and N < 2**31.
-        e = sp.kept.nonzero().squeeze(1)  # (E',) kept entries
-        pix_e = pix.index_select(0, e)  # (E',)
-        pt_e = sp.entry_point.int().index_select(0, e)  # (E',) feature row of each entry
-        w_e = nw.index_select(0, e)  # (E',)
-        order = torch.sort(pix_e.int(), stable=True).indices  # (E',) pixel-major
-        pix_index = pt_e.index_select(0, order)  # (E',) int32
-        pix_weights = w_e.index_select(0, order)  # (E',)
-        pix_offsets = _offsets(torch.bincount(pix_e, minlength=H * W), torch.int32)  # (HW + 1,)
     table = features if features.is_contiguous() else features.contiguous()
     if torch.is_grad_enabled() and features.requires_grad:
         with torch.no_grad():
+            pix_e, pt_e, w_e = _kept_entries(sp, w_all, inv, step, should_stop)
+            pix_index, pix_offsets, pix_weights = _pixel_bags(pix_e, pt_e, w_e, 0, H * W)
             # Point-major bags for the gradient: the taps of each surviving point
             # (weight 0 where not kept), none for culled points.
+            nw = w_all * inv.index_select(0, pix)  # (E,) weights normalised per pixel, 0 at holes
             if sp.taps:
                 pt_index = pix.view(sp.taps, M).t().reshape(-1)  # (E,)
                 pt_weights = nw.view(sp.taps, M).t().reshape(-1)
@@ -392,10 +484,115 @@ def rasterize_points(
             counts = torch.bincount(sp.entry_point, minlength=N)  # (N,)
             pt_offsets = _offsets(counts)  # (N + 1,)
         out = _SparseSplat.apply(table, pix_index, pix_offsets, pix_weights, pt_index, pt_offsets, pt_weights)
+    elif sp.corner00 is not None and C <= CORNER_PATH_MAX_CHANNELS:
+        with torch.no_grad():
+            out = _accumulate_by_corner(sp, inv, table, W, H * W, step, should_stop)
     else:
-        out = _bag_sum(pix_index, table, pix_offsets, pix_weights)  # (HW, C)
+        with torch.no_grad():
+            pix_e, pt_e, w_e = _kept_entries(sp, w_all, inv, step, should_stop)
+            out = _accumulate(pix_e, pt_e, w_e, table, H * W, step, should_stop)
     image = out.view(H, W, C).permute(2, 0, 1)  # (C, H, W), channels-last memory
     hole = hole.view(H, W)
     depth = torch.where(hole, math.inf, sp.depth.to(features.dtype))
     return Fragments(image, wsum.view(H, W), depth, hole)
 
+
+def _kept_entries(sp: _Splats, w_all: torch.Tensor, inv: torch.Tensor, step: Optional[int],
+                  should_stop: Optional[Callable[[], bool]]):
+    """The kept entries, in entry order (cache friendly): pixel (E',) int64, feature row (E',) int32 and
+    weight normalised per pixel (E',) (0 at holes). int32 sorts and gathers faster; indices are < 2**28
+    (MAX_IMAGE_SIDE**2) and N < 2**31."""
+    E = sp.pixel.shape[0]
+    pt_all = sp.entry_point.int()  # (E,)
+    pix_l, pt_l, w_l = [], [], []
+    for piece in _pieces(E, step):
+        _check_stop(should_stop)
+        e = sp.kept[piece].nonzero().squeeze(1) + piece.start  # (e,) ascending
+        pix_c = sp.pixel.index_select(0, e)
+        pix_l.append(pix_c)
+        pt_l.append(pt_all.index_select(0, e))
+        w_l.append(w_all.index_select(0, e) * inv.index_select(0, pix_c))
+    return tuple(t[0] if len(t) == 1 else torch.cat(t) for t in (pix_l, pt_l, w_l))
+
+
+def _accumulate_by_corner(sp: _Splats, inv: torch.Tensor, table: torch.Tensor, W: int, n_pixels: int,
+                          step: Optional[int], should_stop: Optional[Callable[[], bool]]) -> torch.Tensor:
+    """(n_pixels, C) weighted feature sums at supersample 1 (inference only, bilinear 4-tap splats: the
+    entries are (4, M) corner-major), with one sort of the M points.
+
+    The points are sorted (stably) by the output pixel of their corner 00; corner
+    (dy, dx) lands on that pixel + dy W + dx, so the same order is pixel-major
+    for every corner: four pixel-major bag lists from one sort of M keys (not
+    4M), summed per pixel. With ``step``, the pixels are done in bands (each a
+    slice of the four lists, ``should_stop`` checked before each); the bags are
+    the same, so the sums are identical.
+    """
+    _check_stop(should_stop)
+    M = sp.point.shape[0]
+    kept4, weight4 = sp.kept.view(4, M), sp.weight.view(4, M)
+    order = torch.sort(sp.corner00.int(), stable=True).indices  # (M,)
+    o_sorted = sp.corner00.index_select(0, order)  # (M,) ascending
+    pt_sorted = sp.point.int().index_select(0, order)
+    lists = []
+    for c, off in enumerate((0, 1, W, W + 1)):
+        _check_stop(should_stop)
+        e = kept4[c].index_select(0, order).nonzero().squeeze(1)  # (e,) ascending
+        pix = o_sorted.index_select(0, e) + off  # (e,) ascending, in [0, n_pixels)
+        w = weight4[c].index_select(0, order).index_select(0, e).to(table.dtype) * inv.index_select(0, pix)
+        lists.append((pix, pt_sorted.index_select(0, e), w))
+    E = sum(int(p.shape[0]) for p, _, _ in lists)
+    n_bands = 1 if step is None else max(1, -(-E // step))
+    band_px = -(-n_pixels // n_bands) if n_pixels else 1
+    out = torch.empty(n_pixels, table.shape[1], dtype=table.dtype, device=table.device)
+    for lo in range(0, n_pixels, band_px):
+        hi = min(lo + band_px, n_pixels)
+        if n_bands > 1:
+            _check_stop(should_stop)
+        acc = None
+        for pix, idx, w in lists:
+            a, b = (int(v) for v in torch.searchsorted(pix, torch.tensor([lo, hi], device=pix.device)))
+            offsets = _offsets(torch.bincount(pix[a:b] - lo, minlength=hi - lo), torch.int32)
+            part = _bag_sum(idx[a:b], table, offsets, w[a:b])  # (hi - lo, C)
+            acc = part if acc is None else acc.add_(part)
+        out[lo:hi] = acc
+    return out
+
+
+def _pixel_bags(pix_e: torch.Tensor, pt_e: torch.Tensor, w_e: torch.Tensor, lo: int, hi: int):
+    """Bags of the entries of pixels lo..hi-1 (all entries must lie there), pixel-major, each bag in entry order:
+    (feature rows (E,) int32, offsets (hi - lo + 1,) int32, weights (E,))."""
+    order = torch.sort(pix_e.int(), stable=True).indices  # (E,) pixel-major
+    offsets = _offsets(torch.bincount(pix_e - lo, minlength=hi - lo), torch.int32)  # (hi - lo + 1,)
+    return pt_e.index_select(0, order), offsets, w_e.index_select(0, order)
+
+
+def _accumulate(pix_e: torch.Tensor, pt_e: torch.Tensor, w_e: torch.Tensor, table: torch.Tensor, n_pixels: int,
+                step: Optional[int], should_stop: Optional[Callable[[], bool]]) -> torch.Tensor:
+    """(n_pixels, C): per pixel, the weighted sum of its entries' feature rows (inference only).
+
+    With ``step``, in bands of consecutive pixels holding about ``step`` entries
+    each (``should_stop`` checked before each band); a pixel's bag holds the
+    same entries in the same order as in one pass, so the sums are identical.
+    """
+    E = pix_e.shape[0]
+    if step is None or E <= step:
+        _check_stop(should_stop)
+        return _bag_sum_bags(_pixel_bags(pix_e, pt_e, w_e, 0, n_pixels), table)
+    n_bands = -(-E // step)
+    band_px = -(-n_pixels // n_bands)
+    out = torch.empty(n_pixels, table.shape[1], dtype=table.dtype, device=table.device)
+    band = torch.div(pix_e, band_px, rounding_mode="floor").int()  # (E,) band of each entry
+    for k in range(n_bands):
+        _check_stop(should_stop)
+        lo, hi = k * band_px, min((k + 1) * band_px, n_pixels)
+        if lo >= hi:
+            break
+        sel = (band == k).nonzero().squeeze(1)  # (e,) ascending: the entries keep their order
+        bags = _pixel_bags(pix_e.index_select(0, sel), pt_e.index_select(0, sel), w_e.index_select(0, sel), lo, hi)
+        out[lo:hi] = _bag_sum_bags(bags, table)
+    return out
+
+
+def _bag_sum_bags(bags, table: torch.Tensor) -> torch.Tensor:
+    index, offsets, weights = bags
+    return _bag_sum(index, table, offsets, weights)

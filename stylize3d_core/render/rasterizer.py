@@ -8,7 +8,7 @@ and rasterizes.
 
 from __future__ import annotations
 
-from typing import Optional
+from typing import Callable, Optional
 
 import torch
 from torch import nn
@@ -33,7 +33,8 @@ class PointRasterizer(nn.Module):
         self.settings = settings
 
     def forward(self, points_world: torch.Tensor, features: torch.Tensor, cameras: Cameras,
-                point_size: Optional[torch.Tensor] = None) -> Fragments:
+                point_size: Optional[torch.Tensor] = None, *,
+                should_stop: Optional[Callable[[], bool]] = None) -> Fragments:
         """Render ``features`` at ``points_world`` from the single camera in ``cameras``.
 
         Args:
@@ -42,6 +43,8 @@ class PointRasterizer(nn.Module):
             cameras: a :class:`Cameras` batch of exactly one camera.
             point_size: optional (N,) footprint of each point in scene units (its splat
                 grows with magnification, see :func:`rasterize_points`).
+            should_stop: checked between chunks of points (see :func:`rasterize_points`);
+                True stops with :class:`~stylize3d_core.errors.RenderInterrupted`.
         Returns:
             :class:`Fragments` ``image (C, H, W), weight (H, W), depth (H, W), hole (H, W)``.
         """
@@ -56,7 +59,7 @@ class PointRasterizer(nn.Module):
         world_to_cam = cameras.world_to_cam()[0].to(device=device, dtype=dtype)  # (4, 4)
         points_cam = transform_points(world_to_cam, points_world.detach())  # (N, 3)
         K = cameras.intrinsics(self.settings.height, self.settings.width, dtype=dtype)[0].to(device)  # (3, 3)
-        return rasterize_points(points_cam, features, K, self.settings, point_size)
+        return rasterize_points(points_cam, features, K, self.settings, point_size, should_stop=should_stop)
 
     def extra_repr(self) -> str:
         return repr(self.settings)

@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from stylize3d_core.errors import InputError
+from stylize3d_core.errors import InputError, RenderInterrupted
 from stylize3d_core.geometry.camera import Cameras, intrinsics_from_fov, transform_points
 from stylize3d_core.render import Fragments, PointRasterizer, RasterSettings, rasterize_points
 from stylize3d_core.render.rasterize_reference import rasterize_points_reference
@@ -277,6 +277,18 @@ def test_matches_reference_forward_and_backward(supersample, seed):
     assert torch.allclose(feats_a.grad, feats_b.grad, atol=1e-12)
 
 
+@pytest.mark.parametrize("channels", [3, 20])
+def test_inference_matches_the_autograd_path(channels):
+    """Inference accumulates per corner (few channels) or in one sort; training through the autograd bags."""
+    pts, feats, K = random_scene(11, 13, 300, channels, seed=9)
+    settings = RasterSettings(11, 13)
+    with torch.inference_mode():
+        inf = rasterize_points(pts, feats, K, settings)
+    train = rasterize_points(pts, feats.clone().requires_grad_(True), K, settings)
+    assert torch.allclose(inf.image, train.image.detach(), atol=1e-12)
+    assert torch.equal(inf.hole, train.hole) and torch.equal(inf.weight, train.weight)
+
+
 def test_float32_matches_reference():
     H, W = 12, 10
     pts, feats, K = random_scene(H, W, 150, 3, seed=7, dtype=torch.float32)
@@ -286,6 +298,73 @@ def test_float32_matches_reference():
     assert torch.allclose(fast.image, ref.image, atol=1e-5)
     assert torch.allclose(fast.weight, ref.weight, atol=1e-5)
     assert torch.equal(fast.hole, ref.hole)
+
+
+# ----------------------------------------------------------------------------- chunked (interruptible)
+
+
+@pytest.mark.parametrize("supersample", [1, 2])
+@pytest.mark.parametrize("chunk", [1, 7, 64, 1000])
+@pytest.mark.parametrize("dtype", [F64, torch.float32])
+@pytest.mark.parametrize("channels", [5, 20])  # the per-corner path (<= 16 channels) and the one-sort path
+def test_chunked_is_identical_to_one_shot_and_matches_reference(supersample, chunk, dtype, channels):
+    H, W = 13, 17
+    pts, feats, K = random_scene(H, W, 400, channels, seed=3, dtype=dtype)
+    settings = RasterSettings(H, W, supersample=supersample)
+    calls = []
+    with torch.inference_mode():
+        one = rasterize_points(pts, feats, K, settings)
+        chunked = rasterize_points(pts, feats, K, settings, chunk_points=chunk,
+                                   should_stop=lambda: calls.append(1) and False)
+    ref = rasterize_points_reference(pts, feats, K, settings)
+    for a, b in zip(one, chunked):
+        assert torch.equal(a, b)  # to the bit
+    if dtype == F64:  # (float32 rounding can flip a z-buffer test at the tolerance's edge)
+        assert torch.allclose(chunked.image, ref.image, atol=1e-12)
+        assert torch.equal(chunked.hole, ref.hole)
+    # Steps: the point chunks (twice), the weight sums, the kept corners, the pixel bands.
+    n_chunks = -(-400 // chunk)
+    assert len(calls) >= (2 * n_chunks if chunk < 400 else 1)
+
+
+def test_chunked_with_gradient_is_identical():
+    pts, feats, K = random_scene(9, 11, 200, 3, seed=5)
+    settings = RasterSettings(9, 11)
+    fa, fb = feats.clone().requires_grad_(True), feats.clone().requires_grad_(True)
+    a = rasterize_points(pts, fa, K, settings)
+    b = rasterize_points(pts, fb, K, settings, chunk_points=13, should_stop=lambda: False)
+    assert torch.equal(a.image, b.image)
+    a.image.sum().backward()
+    b.image.sum().backward()
+    assert torch.equal(fa.grad, fb.grad)
+
+
+@pytest.mark.parametrize("stop_after", [0, 1, 3, 10, 30])
+def test_should_stop_interrupts_between_chunks(stop_after):
+    pts, feats, K = random_scene(13, 17, 400, 5, seed=3)
+    calls = []
+
+    def should_stop():
+        calls.append(1)
+        return len(calls) > stop_after
+
+    with pytest.raises(RenderInterrupted):
+        rasterize_points(pts, feats, K, RasterSettings(13, 17), chunk_points=16, should_stop=should_stop)
+    assert len(calls) == stop_after + 1  # stopped at the first check that said so
+
+
+def test_empty_cloud_with_chunks():
+    K = simple_K()
+    frag = rasterize_points(torch.zeros(0, 3, dtype=F64), torch.zeros(0, 2, dtype=F64), K, RasterSettings(6, 8),
+                            chunk_points=4, should_stop=lambda: False)
+    assert frag.hole.all() and torch.equal(frag.image, torch.zeros(2, 6, 8, dtype=F64))
+
+
+@pytest.mark.parametrize("chunk", [0, -1, 2.5, True])
+def test_bad_chunk_points(chunk):
+    pts, feats = scene(simple_K(), [(2.5, 3.5, 2.0)])
+    with pytest.raises(InputError, match="chunk_points"):
+        rasterize_points(pts, feats, simple_K(), RasterSettings(6, 8), chunk_points=chunk)
 
 
 @pytest.mark.parametrize("supersample", [1, 2])
@@ -476,3 +555,66 @@ def test_soft_edges_keep_a_silhouette_from_growing(raster):
     plain = raster(pts, feats, K, RasterSettings(6, 6))
     plain_soft = raster(pts, feats, K, RasterSettings(6, 6, soft_edges=True))
     torch.testing.assert_close(plain.image, plain_soft.image)
+
+
+# ----------------------------------------------------------------------------- chunked grown splats
+
+
+@pytest.mark.parametrize("supersample", [1, 2])
+@pytest.mark.parametrize("chunk", [1, 7, 64, 1000])
+@pytest.mark.parametrize("soft_edges", [False, True])
+@pytest.mark.parametrize("channels", [3, 20])
+@pytest.mark.parametrize("pixels", ["mixed", 0.7])  # grown splats of several tap counts; all bilinear
+def test_chunked_grown_splats_are_identical_to_one_shot(supersample, chunk, soft_edges, channels, pixels):
+    """A point's taps come from its own footprint, so chunking by points is exact with point sizes too."""
+    H, W, N = 13, 17, 400
+    pts, feats, K = random_scene(H, W, N, channels, seed=7)
+    g = torch.Generator().manual_seed(7)
+    px = 0.5 + 3.5 * torch.rand(N, generator=g, dtype=F64) if pixels == "mixed" else pixels
+    sizes = footprint(pts, K, px).nan_to_num(0.01)
+    settings = RasterSettings(H, W, supersample=supersample, soft_edges=soft_edges)
+    calls = []
+    with torch.inference_mode():
+        one = rasterize_points(pts, feats, K, settings, point_size=sizes)
+        chunked = rasterize_points(pts, feats, K, settings, point_size=sizes, chunk_points=chunk,
+                                   should_stop=lambda: calls.append(1) and False)
+    for a, b in zip(one, chunked):
+        assert torch.equal(a, b)  # to the bit
+    ref = rasterize_points_reference(pts, feats, K, settings, point_size=sizes)
+    assert torch.allclose(chunked.image, ref.image, atol=1e-12)
+    assert torch.equal(chunked.hole, ref.hole)
+    n_chunks = -(-N // chunk)
+    assert len(calls) >= (2 * n_chunks if chunk < N else 1)
+
+
+@pytest.mark.parametrize("soft_edges", [False, True])
+def test_chunked_grown_splats_with_gradient_are_identical(soft_edges):
+    pts, feats, K = random_scene(9, 11, 200, 3, seed=5)
+    g = torch.Generator().manual_seed(5)
+    sizes = footprint(pts, K, 0.5 + 3.5 * torch.rand(200, generator=g, dtype=F64)).nan_to_num(0.01)
+    settings = RasterSettings(9, 11, soft_edges=soft_edges)
+    fa, fb = feats.clone().requires_grad_(True), feats.clone().requires_grad_(True)
+    a = rasterize_points(pts, fa, K, settings, point_size=sizes)
+    b = rasterize_points(pts, fb, K, settings, point_size=sizes, chunk_points=13, should_stop=lambda: False)
+    for x, y in zip(a, b):
+        assert torch.equal(x, y)
+    upstream = torch.randn(3, 9, 11, dtype=F64, generator=g)
+    (a.image * upstream).sum().backward()
+    (b.image * upstream).sum().backward()
+    assert torch.equal(fa.grad, fb.grad)
+
+
+def test_point_rasterizer_takes_point_size_and_should_stop():
+    pts, feats, _ = random_scene(6, 8, 60, 3, seed=5)
+    pts, feats = pts[12:], feats[12:]  # finite points only
+    pose = torch.eye(4, dtype=F64)
+    cameras = Cameras.create(pose, 50.0)
+    settings = RasterSettings(6, 8, soft_edges=True)
+    K = intrinsics_from_fov(50.0, 6, 8, dtype=F64)
+    sizes = footprint(pts, K, 2.5)
+    frag = PointRasterizer(settings)(pts, feats, cameras, sizes, should_stop=lambda: False)
+    expected = rasterize_points(pts, feats, K, settings, point_size=sizes)
+    assert torch.allclose(frag.image, expected.image, atol=1e-9)
+    assert torch.equal(frag.hole, expected.hole)
+    with pytest.raises(RenderInterrupted):
+        PointRasterizer(settings)(pts, feats, cameras, sizes, should_stop=lambda: True)
