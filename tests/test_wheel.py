@@ -190,5 +190,5 @@ def test_the_installed_viewer_opens_its_sample_stylized_with_its_model(built, tm
     assert shown["stylized"] is True, "the installed viewer did not find its model"
     state = [s for s in result["steps"] if s["op"] == "state"][0]["result"]
     venv = Path(built["venv"]).resolve()
-    for key in ("photo", "style"):
-        assert venv in Path(state[key]).resolve().parents, f"{key} {state[key]} is not the installed sample"
+    for key, path in (("photo", state["spec"]["photo"]), ("style", state["style"])):
+        assert venv in Path(path).resolve().parents, f"{key} {path} is not the installed sample"
