@@ -34,7 +34,8 @@ import numpy as np
 from ..checks import check_range
 from ..errors import ExportError, InputError, PathLike
 from ..geometry.camera import check_fov, focal_from_fov
-from ..io.atomic import atomic_path
+from ..io.atomic import write_atomically
+from ..io.images import read_input_file
 
 SH_C0 = 0.28209479177387814
 """The degree-0 real spherical harmonic, 1 / (2 sqrt(pi))."""
@@ -141,15 +142,19 @@ def write_splat_ply(path: PathLike, xyz: np.ndarray, rgb: np.ndarray, footprint:
     rec["rot_0"] = 1.0  # identity rotation (w, x, y, z); isotropic Gaussians need no other
     header = ["ply", "format binary_little_endian 1.0", "comment stylize3d 3D Gaussian splat (SH degree 0)",
               f"element vertex {n}", *(f"property float {name}" for name in SPLAT_PROPERTIES), "end_header"]
-    try:
-        with atomic_path(dest) as tmp:
-            with open(tmp, "wb") as fh:
-                fh.write(("\n".join(header) + "\n").encode("ascii"))
-                fh.write(rec.tobytes())
-    except ExportError:
-        raise
-    except OSError as e:
-        raise ExportError(f"{dest}: could not write the Gaussian splat file: {e}") from e
+    head = ("\n".join(header) + "\n").encode("ascii")
+    body = rec.tobytes()
+
+    def verify(tmp: Path) -> None:  # the whole file reads back, every Gaussian
+        try:
+            got = len(read_vertex_properties(tmp)["x"])
+        except InputError as e:
+            raise ExportError(f"{dest}: the written splat file does not read back ({e.problem})") from e
+        if got != n:
+            raise ExportError(f"{dest}: the written splat file reads back {got} of {n} Gaussians")
+
+    write_atomically(dest, "Gaussian splat file", lambda tmp: tmp.write_bytes(head + body),
+                     verify=verify, size=len(head) + len(body))
     return dest
 
 
@@ -157,12 +162,7 @@ def read_vertex_properties(path: PathLike) -> Dict[str, np.ndarray]:
     """Every vertex property of a binary little-endian PLY whose only element is ``vertex``,
     as ``{name: (N,) array}`` (enough to check a splat file; not a general PLY reader)."""
     src = Path(path)
-    try:
-        data = src.read_bytes()
-    except FileNotFoundError:
-        raise InputError(src, "file not found") from None
-    except OSError as e:
-        raise InputError(src, f"cannot read the file: {e}") from None
+    data = read_input_file(src, "PLY")
     end = data.find(b"end_header\n", 0, 64 * 1024)
     if not data.startswith(b"ply\n") or end < 0:
         raise InputError(src, "not a PLY file with a header ending in 'end_header'")
