@@ -37,13 +37,23 @@ MAX_EYE_RATIO = 0.5
 """The eyes may be at most this fraction of the nearest surface's depth apart (in every frame)."""
 
 
+def _check_eye_distance_value(eye_distance: float) -> float:
+    e = float(eye_distance)
+    if not np.isfinite(e) or e <= 0:
+        raise InputError("eye_distance", f"must be a finite number > 0, got {eye_distance!r}")
+    return e
+
+
+def _check_views(left: np.ndarray, right: np.ndarray) -> None:
+    if left.shape != right.shape or left.ndim != 3 or left.shape[2] != 3:
+        raise InputError("stereo views", f"the two views differ or are not (H, W, 3): {left.shape}, {right.shape}")
+
+
 def eye_cameras(cameras: Cameras, eye_distance: float) -> Tuple[Cameras, Cameras]:
     """(left eyes, right eyes) of ``cameras``: each moved by -/+ ``eye_distance / 2`` along its own x axis."""
     if not isinstance(cameras, Cameras) or len(cameras) == 0:
         raise InputError("cameras", "expected at least one camera")
-    e = float(eye_distance)
-    if not np.isfinite(e) or e <= 0:
-        raise InputError("eye_distance", f"must be a finite number > 0, got {eye_distance!r}")
+    e = _check_eye_distance_value(eye_distance)
     c2w = cameras.cam_to_world.to(torch.float64)
     shift = c2w[:, :3, 0] * (e / 2.0)  # (B, 3): the camera's x axis in the world
     left, right = c2w.clone(), c2w.clone()
@@ -71,9 +81,7 @@ def nearest_depths(points: np.ndarray, cameras: Cameras, size: Tuple[int, int]) 
 def check_eye_distance(eye_distance: float, points: np.ndarray, cameras: Cameras, size: Tuple[int, int]) -> float:
     """``eye_distance`` if every frame's nearest visible surface is at least ``eye_distance / MAX_EYE_RATIO``
     away, else an :class:`InputError` naming ``eye_distance`` with the largest distance that fits."""
-    e = float(eye_distance)
-    if not np.isfinite(e) or e <= 0:
-        raise InputError("eye_distance", f"must be a finite number > 0, got {eye_distance!r}")
+    e = _check_eye_distance_value(eye_distance)
     near = nearest_depths(points, cameras, size)
     if not np.isfinite(near).any():
         raise InputError("cameras", "no camera of the path sees the scene")
@@ -89,8 +97,7 @@ def check_eye_distance(eye_distance: float, points: np.ndarray, cameras: Cameras
 def side_by_side(left: np.ndarray, right: np.ndarray, layout: StereoLayout = "full") -> np.ndarray:
     """One side-by-side frame of two (H, W, 3) views: (H, 2W, 3) full width, or (H, W, 3) half width
     (each view squeezed to W // 2 and W - W // 2 columns)."""
-    if left.shape != right.shape or left.ndim != 3 or left.shape[2] != 3:
-        raise InputError("stereo views", f"the two views differ or are not (H, W, 3): {left.shape}, {right.shape}")
+    _check_views(left, right)
     if layout == "full":
         return np.concatenate([left, right], axis=1)
     if layout != "half":
@@ -106,8 +113,7 @@ def side_by_side(left: np.ndarray, right: np.ndarray, layout: StereoLayout = "fu
 
 def anaglyph(left: np.ndarray, right: np.ndarray) -> np.ndarray:
     """Red-cyan colour anaglyph (H, W, 3) of two (H, W, 3) views: red from ``left``, green and blue from ``right``."""
-    if left.shape != right.shape or left.ndim != 3 or left.shape[2] != 3:
-        raise InputError("stereo views", f"the two views differ or are not (H, W, 3): {left.shape}, {right.shape}")
+    _check_views(left, right)
     out = np.array(right, dtype=np.float32, copy=True)
     out[..., 0] = left[..., 0]
     return out
