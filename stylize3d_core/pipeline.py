@@ -208,6 +208,11 @@ def _with_relief(depth_map: DepthMap, relief: float) -> DepthMap:
 def load_photo3d(spec: PhotoSpec, *, log: Log = _quiet) -> Photo3D:
     """Read the photo ``spec`` names, get its depth from the source ``spec.depth`` names (edges
     aligned with the photo's by ``spec.refine_depth``, if given), and build the 3D photo."""
+    return _load_photo3d(spec, log)[0]
+
+
+def _load_photo3d(spec: PhotoSpec, log: Log) -> Tuple[Photo3D, Tuple[int, int]]:
+    """:func:`load_photo3d`, and the photo file's (H, W) before shrinking (``LoadedImage.original_size``)."""
     from .depth.refine import RefineSettings  # the depth package is heavier (onnxruntime)
     from .depth.sources import parse_depth_spec
 
@@ -237,7 +242,7 @@ def load_photo3d(spec: PhotoSpec, *, log: Log = _quiet) -> Photo3D:
         f"photo {photo}: {w}x{h}, fov {fov:.1f} deg, depth from {depth_map.source}, "
         f"{len(p3d.points):,} points ({'with' if p3d.ldi.inpainted else 'no'} hidden layer)"
     )
-    return p3d
+    return p3d, image.original_size
 
 
 def job_cameras(job: RenderJob, fov_y_deg: float, loaded: Optional[CameraPath] = None) -> Tuple[Cameras, float]:
@@ -282,8 +287,9 @@ def run_render(job: RenderJob, *, progress: Optional[Progress] = None, log: Log 
             and loaded_path.fps > MAX_GIF_FPS:
         raise InputError(job.camera_path, f"its {loaded_path.fps:g} fps is too fast for a GIF "
                                           f"(at most {MAX_GIF_FPS:g})")
+    file_size = None  # the photo file's (H, W), for a layered job's mask (never multi-view)
     if job.views is None:
-        p3d = load_photo3d(job.spec, log=log)
+        p3d, file_size = _load_photo3d(job.spec, log)
     else:
         from .multiview import load_merged
 
@@ -302,7 +308,7 @@ def run_render(job: RenderJob, *, progress: Optional[Progress] = None, log: Log 
     if job.exports.save_trajectory is not None:
         write_camera_path(job.exports.save_trajectory, cameras, fmt="open3d", fps=fps, image_size=(H, W))
         log(f"wrote {job.exports.save_trajectory} (Open3D PinholeCameraTrajectory)")
-    renderer = _renderer(p3d, job, style_inputs, timings, log)
+    renderer = _renderer(p3d, job, style_inputs, timings, log, file_size)
     t0 = time.perf_counter()
     if job.exports.export in POINT_KINDS:
         from .export.run import export_points
@@ -320,7 +326,8 @@ def run_render(job: RenderJob, *, progress: Optional[Progress] = None, log: Log 
     return RenderResult(Path(out), n_frames, (H, W), len(p3d.points), timings)
 
 
-def _renderer(p3d: Photo3D, job: RenderJob, style_inputs, timings: Dict[str, float], log: Log):
+def _renderer(p3d: Photo3D, job: RenderJob, style_inputs, timings: Dict[str, float], log: Log,
+              file_size: Optional[Tuple[int, int]]):
     """What renders the job's views: the plain renderer, the stylized photo, or its layered composition."""
     if job.style is None:
         return PlainRenderer(p3d.points, PlainRenderSettings(supersample=job.supersample))
@@ -329,7 +336,6 @@ def _renderer(p3d: Photo3D, job: RenderJob, style_inputs, timings: Dict[str, flo
     from .export.layered import LayeredRenderer, photo_mask
     from .scene.masks import point_mask
 
-    file_size = load_image(job.spec.photo, max_size=job.spec.max_size).original_size
     mask = photo_mask(job.layers, p3d, file_size)  # before the model loads: a bad mask fails fast
     kept = "unstylized" if job.layers.foreground_strength is None else \
         f"at strength {job.layers.foreground_strength:g}"
