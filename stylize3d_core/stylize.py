@@ -171,7 +171,7 @@ class Stylized3DPhoto:
         else:
             with torch.inference_mode():
                 maps = self._encoder()(style_tensor(style_rgb, "second style image")).maps
-                self._stylized2 = self.model.stylizer.stylize(self._content, maps)  # (M, C)
+                self._stylized2 = self.model.stylizer.stylize(self._content, maps).float()  # (M, C), as set_style
         self._dense = None
 
     def set_mix(self, mix: float) -> None:

@@ -182,9 +182,9 @@ class PlainRenderer:
             depth_tolerance=self.settings.depth_tolerance, supersample=self.settings.supersample,
             soft_edges=self.settings.soft_edges,
         )
-        size = None
-        if self._size is not None:
-            size = self._size[:keep] * math.sqrt(self.num_points / max(keep, 1))
+        size = self._size
+        if size is not None and keep < self.num_points:  # a full frame uses the cached sizes as they are
+            size = size[:keep] * math.sqrt(self.num_points / max(keep, 1))
         with torch.inference_mode():
             return PointRasterizer(raster)(self._xyz[:keep], self._rgb[:keep], camera, size,
                                            should_stop=should_stop)
