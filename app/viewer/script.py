@@ -221,14 +221,19 @@ class ScriptRunner:
 
         return self.main(apply)
 
+    @staticmethod
+    def _wait_while(busy: Callable[[], bool], timeout: float, what: str, poll: float = 0.05) -> None:
+        """Poll ``busy()`` from this thread until it is false; raise TimeoutError after ``timeout`` s."""
+        t_end = time.monotonic() + float(timeout)
+        while busy():
+            if time.monotonic() > t_end:
+                raise TimeoutError(f"{what} within {timeout:g} s")
+            time.sleep(poll)
+
     def op_export(self, path: str, wait: bool = True, timeout: float = 300.0) -> Dict[str, Any]:
         dest = self.main(lambda: self.window.exports.start_export(path))
         if wait:
-            t_end = time.monotonic() + float(timeout)
-            while self.window.exports.exporting:
-                if time.monotonic() > t_end:
-                    raise TimeoutError(f"the export did not finish within {timeout:g} s")
-                time.sleep(0.1)
+            self._wait_while(lambda: self.window.exports.exporting, timeout, "the export did not finish", 0.1)
         return {"destination": dest, "status": self.main(lambda: self.window.panel.status.text)}
 
     def op_preview_path(self, timeout: float = 120.0) -> Dict[str, Any]:
@@ -236,20 +241,12 @@ class ScriptRunner:
         w = self.window
         n0 = self.main(lambda: len(w.stats["preview_shown"]))
         self.main(w.paths.toggle_preview)
-        t_end = time.monotonic() + float(timeout)
-        while w.paths.playing:
-            if time.monotonic() > t_end:
-                raise TimeoutError(f"the camera-path preview did not end within {timeout:g} s")
-            time.sleep(0.05)
+        self._wait_while(lambda: w.paths.playing, timeout, "the camera-path preview did not end")
         return {"frames_shown": self.main(lambda: len(w.stats["preview_shown"])) - n0}
 
     def op_wait_export(self, timeout: float = 300.0) -> Dict[str, Any]:
         """Wait until the running export (if any) ends."""
-        t_end = time.monotonic() + float(timeout)
-        while self.window.exports.exporting:
-            if time.monotonic() > t_end:
-                raise TimeoutError(f"the export did not finish within {timeout:g} s")
-            time.sleep(0.1)
+        self._wait_while(lambda: self.window.exports.exporting, timeout, "the export did not finish", 0.1)
         return {"status": self.main(lambda: self.window.panel.status.text)}
 
     def op_ping(self, count: int = 20, interval: float = 0.05) -> Dict[str, Any]:
@@ -269,11 +266,8 @@ class ScriptRunner:
 
     def op_screenshot(self, path: str, timeout: float = 60.0) -> str:
         self.main(lambda: self.window.exports.save_screenshot(path))
-        t_end = time.monotonic() + float(timeout)
-        while not (self.window.worker.is_idle() and os.path.exists(path)):
-            if time.monotonic() > t_end:
-                raise TimeoutError(f"{path} was not written within {timeout:g} s")
-            time.sleep(0.05)
+        self._wait_while(lambda: not (self.window.worker.is_idle() and os.path.exists(path)), timeout,
+                         f"{path} was not written")
         return path
 
     def op_grab_window(self, path: str) -> Dict[str, Any]:
@@ -297,11 +291,7 @@ class ScriptRunner:
         self.op_wait_worker()
 
     def op_wait_worker(self, timeout: float = 60.0) -> None:
-        t_end = time.monotonic() + float(timeout)
-        while not self.window.worker.is_idle():
-            if time.monotonic() > t_end:
-                raise TimeoutError(f"the worker did not finish within {timeout:g} s")
-            time.sleep(0.05)
+        self._wait_while(lambda: not self.window.worker.is_idle(), timeout, "the worker did not finish")
         time.sleep(0.1)  # its result reaches the main thread through one more post
 
     def op_help(self, visible: bool = True) -> None:
@@ -419,11 +409,7 @@ class ScriptRunner:
         w = self.window
         n0 = self.main(lambda: len(w.stats["full_seconds"]))
         self.main(w.paths.on_preview_full)
-        t_end = time.monotonic() + float(timeout)
-        while w.paths.playing:
-            if time.monotonic() > t_end:
-                raise TimeoutError(f"the keyframe preview did not end within {timeout:g} s")
-            time.sleep(0.05)
+        self._wait_while(lambda: w.paths.playing, timeout, "the keyframe preview did not end")
         return {"full_frames_shown": self.main(lambda: len(w.stats["full_seconds"])) - n0}
 
     def op_resize(self, width: int, height: int) -> Dict[str, Any]:
