@@ -50,6 +50,13 @@ def _add_training(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--out", default=d.styles_dir, help=f"folder (default {d.styles_dir})")
     p.add_argument("--count", type=int, default=300, help="number of style images (default 300)")
     p.add_argument("--seed", type=int, default=0)
+    p = sub.add_parser("prepare-teacher", help="stage 2: bake the 2D network's stylization of every training "
+                                               "sample onto its points (consistent stylized targets)")
+    p.add_argument("--data", default=d.data_dir + "/train", help="training samples (default runs/data/train)")
+    p.add_argument("--styles", default=d.styles_dir, help=f"style bank (default {d.styles_dir})")
+    p.add_argument("--out", default="runs/teacher", help="folder (default runs/teacher)")
+    p.add_argument("--per-sample", type=int, default=1, help="styles per sample (default 1)")
+    p.add_argument("--seed", type=int, default=0)
     p = sub.add_parser("train", help="train (or resume) stage 1 or 2 of the model",
                        description="Train the stylization model. Runs resume from the checkpoint in --out. "
                                    "For several GPUs: torchrun --nproc_per_node=N -m app.cli train ...")
@@ -71,6 +78,10 @@ def _add_training(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--log-every", type=int, default=d.log_every)
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     p.add_argument("--seed", type=int, default=d.seed)
+    p.add_argument("--teacher", default=None, help="stage 2: a prepare-teacher folder for --data (default: none)")
+    p.add_argument("--teacher-fraction", type=float, default=d.teacher_fraction,
+                   help=f"stage 2: share of stylized samples that learn from their teacher "
+                        f"(default {d.teacher_fraction})")
 
 
 def _add_info(sub: "argparse._SubParsersAction") -> None:
@@ -138,6 +149,16 @@ def _prepare_styles(args: argparse.Namespace) -> int:
     return 0
 
 
+def _prepare_teacher(args: argparse.Namespace) -> int:
+    from stylize3d_core.train.teacher import build_teacher
+
+    progress = console_progress("teacher")
+    r = build_teacher(args.data, args.styles, args.out, styles_per_sample=args.per_sample, seed=args.seed,
+                      progress=progress)
+    print(f"{PROG}: {args.out}: {r['made']} made, {r['kept']} already there ({r['seconds']:.0f} s)", file=sys.stderr)
+    return 0
+
+
 def _train(args: argparse.Namespace) -> int:
     from stylize3d_core.train.trainer import TrainConfig, train
 
@@ -146,7 +167,7 @@ def _train(args: argparse.Namespace) -> int:
         iterations=args.iterations, batch_size=args.batch_size, lr=args.lr, lr_schedule=args.lr_schedule,
         checkpoint_every=args.checkpoint_every, log_every=args.log_every,
         max_hours=args.hours, init=args.init, init_stylizer=args.init_stylizer, seed=args.seed,
-        threads=args.threads,
+        threads=args.threads, teacher_dir=args.teacher, teacher_fraction=args.teacher_fraction,
     )
     path = train(config, log=lambda msg: print(f"{PROG}: {msg}", file=sys.stderr, flush=True))
     print(f"{PROG}: checkpoint {path}", file=sys.stderr)
@@ -227,7 +248,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     shown, warnings.showwarning = warnings.showwarning, show_warning
     try:
         handlers = {"render": _render, "prepare-data": _prepare_data, "prepare-styles": _prepare_styles,
-                    "train": _train, "info": _info, "bench": _bench}
+                    "prepare-teacher": _prepare_teacher, "train": _train, "info": _info, "bench": _bench}
         return handlers[args.command](args)
     except InputError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)

@@ -3,12 +3,13 @@
 A checkpoint is one ``.safetensors`` file. Its metadata holds::
 
     format   "stylize3d-model"
-    version  "2"
+    version  "3"
     config   the ModelConfig as JSON (so the file alone rebuilds the model)
     stage    "1" (view synthesis) or "2" (stylization)
     info     free JSON: iterations, data, command, hours...
 
-Version "1" files (the shipped checkpoint among them) are still read: their
+Version "2" files have no detail path (``detail_channels`` 0; it was added in
+version 3). Version "1" files are still read too: their
 config kept the neighbourhood settings (k, radii, down-sampling, FPS start)
 inside ``encoder`` and the subset size as ``encoder_max_points``;
 :func:`config_from_json` maps them to ``neighbourhood``, with the settings that
@@ -38,8 +39,8 @@ from .scene_geometry import NeighbourhoodConfig
 from .stylize3d import ModelConfig, Stylize3DModel
 
 FORMAT = "stylize3d-model"
-VERSION = "2"
-READABLE_VERSIONS = ("1", "2")
+VERSION = "3"
+READABLE_VERSIONS = ("1", "2", "3")
 _V1_NEIGHBOURHOOD = ("k", "stem_radius", "stage_radii", "downsample", "fps_start")
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -84,7 +85,7 @@ def config_from_json(text: str, source: PathLike, version: str = VERSION) -> Mod
         dec = DecoderConfig(**d["decoder"])
         return ModelConfig(
             name=d["name"], encoder=enc, neighbourhood=hood, stylizer=sty, raster_channels=int(d["raster_channels"]),
-            decoder=dec,
+            decoder=dec, detail_channels=int(d.get("detail_channels", 0)),
         )
     except (ValueError, KeyError, TypeError, AttributeError) as e:
         raise InputError(source, f"the checkpoint's model configuration is unreadable ({e})") from None

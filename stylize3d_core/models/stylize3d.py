@@ -7,8 +7,16 @@ Data flow for one photo (N points, M ~ N_enc / 16 encoded points)::
       v   NDC, encoder subset (<= max_points), FPS/ball-query hierarchy, 3-NN weights
     encode            -> content (M, C)                      once per photo
     stylize (+alpha)  -> features (M, C)                     once per style / strength
-    dense_features    -> (N, Cr) = IDW(project(features))    once per style / strength
-    render_view       -> rasterize (Cr, H, W) -> decode (3, H, W)   per camera
+    dense_features    -> (N, Cr + D) = [IDW(project(features)) | rgb]   once per style / strength
+    render_view       -> rasterize (Cr + D, H, W) -> decode (3, H, W)   per camera
+
+**Detail path** (``detail_channels`` D = 3, the ``lite`` default): beside the
+learned features, which live on 1/16 of the points and reach the others by 3-NN
+interpolation, every point's own colour is rasterized at full resolution and
+given to the decoder, so edges and fine structure survive decoding while the
+style comes from the stylized features. D = 0 is the paper's layout (and that of
+checkpoints written before the detail path; :func:`add_detail_path` widens such a
+model without changing its output).
 
 The projection to ``raster_channels`` happens before the IDW upsampling: both
 are linear and the IDW weights sum to one, so the order does not change the
@@ -23,7 +31,7 @@ features reach every point through the 3-NN upsampling.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Literal, Optional, Sequence, Tuple
 
 import torch
@@ -42,6 +50,9 @@ from .scene_geometry import NeighbourhoodConfig, SceneGeometry, prepare_geometry
 
 ConfigName = Literal["lite", "paper"]
 
+DETAIL_CHANNELS = (0, 3)
+"""Allowed ``ModelConfig.detail_channels``: none, or the points' RGB."""
+
 
 @dataclass(frozen=True)
 class ModelConfig:
@@ -55,8 +66,9 @@ class ModelConfig:
             their density scaling, k, the 3-NN upsampling, the encoder subset size);
             ``neighbourhood.num_stages`` must equal the encoder's stages.
         stylizer: AdaAttN with phi/psi MLPs; ``content_channels`` must equal the encoder's output.
-        raster_channels: channels splatted by the rasterizer (the decoder's input).
-        decoder: the U-Net; ``in_channels`` must equal ``raster_channels``.
+        raster_channels: learned feature channels splatted by the rasterizer.
+        detail_channels: 0 (no detail path) or 3 (each point's RGB rasterized beside the features).
+        decoder: the U-Net; ``in_channels`` must equal ``raster_channels + detail_channels``.
     """
 
     name: ConfigName = "lite"
@@ -65,7 +77,8 @@ class ModelConfig:
     stylizer: AdaAttNConfig = field(default_factory=lambda: AdaAttNConfig(
         content_channels=128, hidden=128, value_channels=128, qk_channels=64))
     raster_channels: int = 32
-    decoder: DecoderConfig = field(default_factory=lambda: DecoderConfig.lite(in_channels=32))
+    decoder: DecoderConfig = field(default_factory=lambda: DecoderConfig.lite(in_channels=32 + 3))
+    detail_channels: int = 3
 
     def __post_init__(self) -> None:
         if not isinstance(self.neighbourhood, NeighbourhoodConfig):
@@ -77,23 +90,28 @@ class ModelConfig:
         if self.stylizer.content_channels != self.encoder.out_channels:
             raise InputError("ModelConfig", f"stylizer content_channels {self.stylizer.content_channels} != "
                              f"encoder output {self.encoder.out_channels}")
-        if self.decoder.in_channels != self.raster_channels:
+        if self.detail_channels not in DETAIL_CHANNELS:
+            raise InputError("ModelConfig.detail_channels", f"must be one of {DETAIL_CHANNELS}, got "
+                                                            f"{self.detail_channels!r}")
+        if self.decoder.in_channels != self.raster_channels + self.detail_channels:
             raise InputError("ModelConfig", f"decoder in_channels {self.decoder.in_channels} != "
-                             f"raster_channels {self.raster_channels}")
+                             f"raster_channels {self.raster_channels} + detail_channels {self.detail_channels}")
         if self.decoder.supersample:
             raise InputError("ModelConfig", "supersampling is done by the rasterizer; keep decoder.supersample False")
 
     @classmethod
     def lite(cls) -> "ModelConfig":
-        """CPU configuration: encoder 32/64/128, AdaAttN 128 (q/k 64), 32 raster channels, decoder width 96."""
+        """CPU configuration: encoder 32/64/128, AdaAttN 128 (q/k 64), 32 raster channels + the RGB detail
+        path, decoder width 96."""
         return cls()
 
     @classmethod
     def paper(cls) -> "ModelConfig":
-        """The public code's widths: encoder 64/128/256, AdaAttN 256, 256 raster channels, decoder 256."""
+        """The public code's widths: encoder 64/128/256, AdaAttN 256, 256 raster channels + the RGB
+        detail path, decoder 256."""
         return cls(
             name="paper", encoder=EncoderConfig.paper(), stylizer=AdaAttNConfig.paper(),
-            raster_channels=256, decoder=DecoderConfig.paper(in_channels=256),
+            raster_channels=256, decoder=DecoderConfig.paper(in_channels=256 + 3), detail_channels=3,
         )
 
     @classmethod
@@ -137,8 +155,14 @@ class Stylize3DModel(nn.Module):
         return blend(content, self.stylizer.stylize(content, style_maps), alpha)
 
     def dense_features(self, sparse: torch.Tensor, geom: SceneGeometry) -> torch.Tensor:
-        """Project sparse features (M, C) to raster channels and upsample to every point: (N, Cr)."""
-        return interpolate(self.to_raster(sparse), geom.upsample.idx, geom.upsample.weight)
+        """Project sparse features (M, C) to raster channels and upsample to every point: (N, Cr + D).
+
+        With the detail path (D = 3) the points' own colours ``geom.rgb`` follow the Cr learned channels.
+        """
+        dense = interpolate(self.to_raster(sparse), geom.upsample.idx, geom.upsample.weight)
+        if self.config.detail_channels:
+            dense = torch.cat([dense, geom.rgb.to(dense.dtype)], dim=1)
+        return dense
 
     def render_view(
         self, dense: torch.Tensor, xyz: torch.Tensor, camera: Cameras, height: int, width: int,
@@ -158,11 +182,35 @@ class Stylize3DModel(nn.Module):
         return rgb, frags
 
 
+def add_detail_path(model: Stylize3DModel) -> Stylize3DModel:
+    """A copy of a model without the detail path, with it added and its output unchanged.
+
+    The decoder's two first convolutions get zero weights for the three new RGB
+    input channels (inserted between the learned features and the mask channel);
+    every other weight is copied. Training then learns to use the new input.
+    """
+    cfg = model.config
+    if cfg.detail_channels:
+        raise InputError("model", "already has the detail path")
+    d = DETAIL_CHANNELS[-1]
+    new_cfg = replace(cfg, detail_channels=d, decoder=replace(cfg.decoder, in_channels=cfg.decoder.in_channels + d))
+    wide = Stylize3DModel(new_cfg)
+    state = dict(model.state_dict())
+    c = cfg.decoder.in_channels  # learned channels; the mask channel follows them
+    for key in ("decoder.skips.0.weight", "decoder.downs.0.conv1.weight"):
+        w = state[key]  # (out, c + 1, k, k)
+        zeros = w.new_zeros((w.shape[0], d) + tuple(w.shape[2:]))
+        state[key] = torch.cat([w[:, :c], zeros, w[:, c:]], dim=1)
+    wide.load_state_dict(state)
+    wide.train(model.training)
+    return wide
+
+
 def count_parameters(module: nn.Module) -> int:
     """Number of trainable parameters."""
     return sum(p.numel() for p in module.parameters() if p.requires_grad)
 
 
 __all__ = [
-    "ModelConfig", "NeighbourhoodConfig", "SceneGeometry", "prepare_geometry", "Stylize3DModel", "count_parameters",
+    "DETAIL_CHANNELS", "add_detail_path", "ModelConfig", "NeighbourhoodConfig", "SceneGeometry", "prepare_geometry", "Stylize3DModel", "count_parameters",
 ]

@@ -9,7 +9,10 @@
   learn AdaAttN content + global style losses against a style image from the
   style bank, plus the consistency loss. A fraction of the steps keep the
   stage-1 loss at strength 0, so the decoder still renders the original photo
-  when the user sets the strength to 0.
+  when the user sets the strength to 0. With a teacher folder
+  (:mod:`.teacher`, ``--teacher``), a fraction of the stylized samples use the
+  style the 2D network baked onto that sample's points, and add an L1 +
+  perceptual loss against those baked colours rendered into the target views.
 
 Consistency loss: a random subset of the sample's points is
 projected into every predicted view; for every pair of views, the L1 difference
@@ -32,7 +35,7 @@ import os
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable, Dict, List, Optional
+from typing import Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 import torch
@@ -45,11 +48,12 @@ from ..models.checkpoint import load_checkpoint, save_checkpoint
 from ..models.efficientnet_lite import EfficientNetLiteFeatures
 from ..models.losses import PerceptualLoss, PerceptualLossConfig, StylizationLoss
 from ..models.style_features import StyleEncoder
-from ..models.stylize3d import ConfigName, ModelConfig, Stylize3DModel
+from ..models.stylize3d import ConfigName, ModelConfig, Stylize3DModel, add_detail_path
 from ..render.reproject import pairwise_consistency, sample_view
 from .cache import TrainDataset
 from .data import TrainSample
 from .styles import StyleBank
+from .teacher import TeacherSet, teacher_targets
 
 STYLE_CROP = 160
 """Side of the random style crops shown to the stylizer in stage 2, in pixels."""
@@ -71,6 +75,8 @@ class LossWeights:
         style: stage 2, global mean/std style loss (raw ~60 at the start). Default 0.1.
         consistency: stage 1 (and stage-2 strength-0 steps), multi-view consistency L1. Default 1.
         consistency_stylized: stage 2, multi-view consistency L1 of stylized views (raw ~0.007). Default 50.
+        teacher: stage 2 teacher samples, L1 against the baked teacher targets (masked). Default 1.
+        teacher_perceptual: stage 2 teacher samples, EfficientNet feature L1 against them. Default 0.05.
     """
 
     l1: float = 1.0
@@ -79,6 +85,8 @@ class LossWeights:
     style: float = 0.1
     consistency: float = 1.0
     consistency_stylized: float = 50.0
+    teacher: float = 1.0
+    teacher_perceptual: float = 0.05
 
 
 @dataclass(frozen=True)
@@ -109,6 +117,9 @@ class TrainConfig:
             trained further since); ignored when the run resumes.
         seed: base seed (sample order, style choice, consistency points).
         threads: torch CPU threads (None: torch's default).
+        teacher_dir: stage 2, a folder written by :func:`~.teacher.build_teacher` for ``data_dir``; None: no teacher.
+        teacher_fraction: stage 2, share of the stylized samples that use their teacher (the rest take a
+            random style crop and only the AdaAttN losses).
     """
 
     stage: int = 1
@@ -130,6 +141,8 @@ class TrainConfig:
     init_stylizer: Optional[str] = None
     seed: int = 0
     threads: Optional[int] = None
+    teacher_dir: Optional[str] = None
+    teacher_fraction: float = 0.7
 
     def __post_init__(self) -> None:
         if self.stage not in (1, 2):
@@ -143,6 +156,9 @@ class TrainConfig:
         check_range(self.recon_fraction, "recon_fraction", 0.0, 1.0)
         if self.init_stylizer is not None and self.stage != 2:
             raise InputError("init_stylizer", "only stage 2 trains the stylizer")
+        if self.teacher_dir is not None and self.stage != 2:
+            raise InputError("teacher_dir", "the teacher trains stylization: stage 2 only")
+        check_range(self.teacher_fraction, "teacher_fraction", 0.0, 1.0)
         if self.max_hours is not None:
             check_range(self.max_hours, "max_hours", 0.0, 1e4, inclusive=False)
 
@@ -188,8 +204,10 @@ class TrainStep(nn.Module):
         self.weights = weights
         self.consistency_points = consistency_points
 
-    def forward(self, sample: TrainSample, style: Optional[torch.Tensor], generator: torch.Generator
-                ) -> Dict[str, torch.Tensor]:
+    def forward(self, sample: TrainSample, style: Optional[torch.Tensor], generator: torch.Generator,
+                teacher: Optional[Tuple[torch.Tensor, torch.Tensor]] = None) -> Dict[str, torch.Tensor]:
+        """The weighted loss terms of one sample; ``teacher``: (targets (V, 3, H, W), masks (V, H, W)) of the
+        style baked by the 2D network (stylized samples only)."""
         geom = sample.geometry
         content = self.model.encode(geom)  # (M, C)
         if style is not None:
@@ -216,6 +234,11 @@ class TrainStep(nn.Module):
             st = self.stylization(pred, target, maps)
             terms["content"] = w.content * st.content
             terms["style"] = w.style * st.style
+            if teacher is not None:
+                t_target, t_mask = teacher[0].to(pred.device), teacher[1][:, None].to(pred.device, pred.dtype)
+                terms["teacher"] = w.teacher * ((pred - t_target).abs() * t_mask).sum() / (
+                    3 * t_mask.sum()).clamp(min=1.0)
+                terms["teacher_perceptual"] = w.teacher_perceptual * self.perceptual(pred, t_target)
         n = geom.xyz.shape[0]
         pick = torch.randperm(n, generator=generator)[: self.consistency_points]
         weight = w.consistency if style is None else w.consistency_stylized
@@ -265,10 +288,14 @@ def train(config: TrainConfig, log: Log = print) -> Path:
         state = None
     if model.config.name != config.model:
         raise InputError("model", f"the checkpoint is a {model.config.name!r} model, not {config.model!r}")
+    if state is None and not model.config.detail_channels and ModelConfig.by_name(config.model).detail_channels:
+        model = add_detail_path(model)
+        log("added the detail path to the initial model (zero weights: same output)")
     if state is None and config.init_stylizer is not None:
         donor = load_checkpoint(config.init_stylizer).model
-        if donor.config != model.config:
-            raise InputError(config.init_stylizer, "its model configuration differs from the one being trained")
+        if donor.config.stylizer != model.config.stylizer or donor.config.encoder != model.config.encoder:
+            raise InputError(config.init_stylizer, "its encoder or stylizer configuration differs from the one "
+                                                   "being trained")
         model.stylizer.load_state_dict(donor.stylizer.state_dict())
         log(f"stylizer weights from {config.init_stylizer}")
     model.to(device).train()
@@ -291,6 +318,8 @@ def train(config: TrainConfig, log: Log = print) -> Path:
 
     data = TrainDataset(config.data_dir, neighbourhood=model.config.neighbourhood)
     styles = StyleBank(config.styles_dir, max_size=256) if config.stage == 2 else None
+    teachers = TeacherSet(config.teacher_dir, data) if config.teacher_dir is not None else None
+    style_index = {styles.name(i): i for i in range(len(styles))} if styles is not None else {}
     t_start = time.time()
     info = {"stage": config.stage, "config": asdict(config), "data": str(config.data_dir), "samples": len(data)}
 
@@ -313,11 +342,23 @@ def train(config: TrainConfig, log: Log = print) -> Path:
         recon = config.stage == 2 and rng.random() < config.recon_fraction
         for b, i in enumerate(indices):
             sample = data[int(i)]
-            style = styles.sample(rng, STYLE_CROP)[0].to(device) if styles is not None and not recon else None
+            style, teach = None, None
+            if styles is not None and not recon:
+                use_teacher = teachers is not None and int(i) < len(teachers) and rng.random() < config.teacher_fraction
+                if use_teacher:
+                    entry = teachers.entry(int(i), sample.num_points)
+                    slot = int(rng.integers(0, len(entry.styles)))
+                    if entry.styles[slot] not in style_index:
+                        raise InputError(config.teacher_dir, f"style {entry.styles[slot]!r} is not in {config.styles_dir}")
+                    k = style_index[entry.styles[slot]]
+                    style = styles.crop(k, rng, STYLE_CROP, min_scale=1.0).to(device)  # the whole style image
+                    teach = teacher_targets(sample, entry.rgb[slot])
+                else:
+                    style = styles.sample(rng, STYLE_CROP)[0].to(device)
             sync = world > 1 and b < len(indices) - 1
             ctx = ddp.no_sync() if sync else contextlib.nullcontext()
             with ctx:
-                terms = ddp(sample, style, gen)
+                terms = ddp(sample, style, gen, teach)
                 loss = sum(terms.values()) / len(indices)
                 if not torch.isfinite(loss):
                     raise FloatingPointError(f"non-finite loss at iteration {it}: { {k: float(v) for k, v in terms.items()} }")

@@ -10,6 +10,7 @@ from stylize3d_core.models.scene_geometry import NeighbourhoodConfig, prepare_ge
 from stylize3d_core.models.stylize3d import (
     ModelConfig,
     Stylize3DModel,
+    add_detail_path,
     count_parameters,
 )
 
@@ -19,6 +20,11 @@ TINY = ModelConfig(
     stylizer=AdaAttNConfig(content_channels=32, hidden=16, value_channels=16, qk_channels=8),
     raster_channels=8,
     decoder=DecoderConfig(in_channels=8, width=16),
+    detail_channels=0,
+)
+TINY_DETAIL = ModelConfig(
+    name="lite", encoder=TINY.encoder, stylizer=TINY.stylizer, raster_channels=8,
+    decoder=DecoderConfig(in_channels=8 + 3, width=16), detail_channels=3,
 )
 
 
@@ -30,18 +36,21 @@ def test_radius_scale():
     assert radius_scale((128, 128), 5, 5, reference_points_across=256) == pytest.approx(2.0)
 
 
-def test_shapes_and_gradients_through_the_whole_model(cloud):
+@pytest.mark.parametrize("config", [TINY, TINY_DETAIL], ids=["no-detail", "detail"])
+def test_shapes_and_gradients_through_the_whole_model(cloud, config):
     pts, fov = cloud
     geom = prepare_geometry(pts.xyz, pts.rgb, fov, (40, 48), TINY.neighbourhood)
     n = pts.xyz.shape[0]
     assert geom.upsample.idx.shape == (n, 3)
-    model = Stylize3DModel(TINY)
+    model = Stylize3DModel(config)
     content = model.encode(geom)
     assert content.shape == (geom.hierarchy.num_points[-1], 32)
-    style = [torch.rand(1, c, 6, 6) for c in TINY.stylizer.style_channels]
+    style = [torch.rand(1, c, 6, 6) for c in config.stylizer.style_channels]
     feats = model.stylize(content, style, 0.7)
     dense = model.dense_features(feats, geom)
-    assert dense.shape == (n, 8)
+    assert dense.shape == (n, 8 + config.detail_channels)
+    if config.detail_channels:  # the detail path carries every point's own colour
+        assert torch.equal(dense[:, 8:], geom.rgb)
     rgb, frags = model.render_view(dense, geom.xyz, Cameras.identity(fov), 24, 32)
     assert rgb.shape == (3, 24, 32) and torch.isfinite(rgb).all()
     assert ((rgb > 0) & (rgb < 1)).all()
@@ -85,9 +94,35 @@ def test_encode_refuses_geometry_of_other_neighbourhoods(cloud):
         model.encode(other)
 
 
+def test_add_detail_path_keeps_the_output_and_learns_the_new_input(cloud):
+    pts, fov = cloud
+    geom = prepare_geometry(pts.xyz, pts.rgb, fov, (40, 48), TINY.neighbourhood)
+    torch.manual_seed(0)
+    narrow = Stylize3DModel(TINY).eval()
+    wide = add_detail_path(narrow)
+    assert wide.config == TINY_DETAIL and not wide.training
+    cam = Cameras.identity(fov)
+    with torch.no_grad():
+        c = narrow.encode(geom)
+        before = narrow.render_view(narrow.dense_features(c, geom), geom.xyz, cam, 24, 32)[0]
+        after = wide.render_view(wide.dense_features(wide.encode(geom), geom), geom.xyz, cam, 24, 32)[0]
+    torch.testing.assert_close(after, before, rtol=0, atol=1e-6)
+    # the new (zero) input weights get gradients, so training can use the colours
+    wide.train()
+    rgb, _ = wide.render_view(wide.dense_features(wide.encode(geom), geom), geom.xyz, cam, 24, 32)
+    rgb.mean().backward()
+    g = wide.decoder.downs[0].conv1.weight.grad  # (out, 8 + 3 + 1, 3, 3)
+    assert g[:, 8:11].abs().sum() > 0
+    with pytest.raises(InputError, match="already"):
+        add_detail_path(wide)
+
+
 def test_config_checks():
     with pytest.raises(InputError):
-        ModelConfig(raster_channels=16)  # decoder expects 32
+        ModelConfig(raster_channels=16)  # decoder expects 32 + 3
+    with pytest.raises(InputError, match="detail_channels"):
+        ModelConfig(detail_channels=1)
+    assert ModelConfig().decoder.in_channels == 35 and ModelConfig.lite().detail_channels == 3
     with pytest.raises(InputError):
         ModelConfig.by_name("huge")
     assert ModelConfig.paper().raster_channels == 256
