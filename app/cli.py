@@ -78,6 +78,8 @@ def _add_training(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--log-every", type=int, default=d.log_every)
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     p.add_argument("--seed", type=int, default=d.seed)
+    p.add_argument("--weight", action="append", default=[], metavar="NAME=VALUE",
+                   help="override a loss weight (LossWeights field, e.g. colour=0); repeatable")
     p.add_argument("--teacher", default=None, help="stage 2: a prepare-teacher folder for --data (default: none)")
     p.add_argument("--teacher-fraction", type=float, default=d.teacher_fraction,
                    help=f"stage 2: share of stylized samples that learn from their teacher "
@@ -159,6 +161,27 @@ def _prepare_teacher(args: argparse.Namespace) -> int:
     return 0
 
 
+def _loss_weights(items):
+    import dataclasses
+
+    from stylize3d_core.train.trainer import LossWeights
+
+    names = {f.name for f in dataclasses.fields(LossWeights)}
+    values = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or name not in names:
+            raise InputError("--weight", f"expected NAME=VALUE with NAME one of {', '.join(sorted(names))}, "
+                                         f"got {item!r}")
+        try:
+            values[name] = float(value)
+        except ValueError:
+            raise InputError("--weight", f"{name}: {value!r} is not a number") from None
+        if not values[name] >= 0.0:
+            raise InputError("--weight", f"{name} must be >= 0, got {value}")
+    return LossWeights(**values)
+
+
 def _train(args: argparse.Namespace) -> int:
     from stylize3d_core.train.trainer import TrainConfig, train
 
@@ -167,7 +190,7 @@ def _train(args: argparse.Namespace) -> int:
         iterations=args.iterations, batch_size=args.batch_size, lr=args.lr, lr_schedule=args.lr_schedule,
         checkpoint_every=args.checkpoint_every, log_every=args.log_every,
         max_hours=args.hours, init=args.init, init_stylizer=args.init_stylizer, seed=args.seed,
-        threads=args.threads, teacher_dir=args.teacher, teacher_fraction=args.teacher_fraction,
+        threads=args.threads, weights=_loss_weights(args.weight), teacher_dir=args.teacher, teacher_fraction=args.teacher_fraction,
     )
     path = train(config, log=lambda msg: print(f"{PROG}: {msg}", file=sys.stderr, flush=True))
     print(f"{PROG}: checkpoint {path}", file=sys.stderr)

@@ -234,3 +234,45 @@ def style_distance(
         ds = torch.linalg.vector_norm(sa - sb, dim=-1) / root_c
         per_stage.append(dm + ds)
     return torch.stack(per_stage).mean(0)
+
+
+_SRGB_TO_XYZ = torch.tensor([[0.412453, 0.357580, 0.180423],
+                             [0.212671, 0.715160, 0.072169],
+                             [0.019334, 0.119193, 0.950227]])
+"""Linear sRGB -> CIE XYZ (D65), the matrix OpenCV's ``cvtColor(..., COLOR_RGB2Lab)`` uses."""
+_WHITE = (0.950456, 1.0, 1.088754)
+
+
+def rgb_to_lab(rgb: torch.Tensor) -> torch.Tensor:
+    """sRGB (B, 3, H, W) in [0, 1] -> CIE L*a*b* (B, 3, H, W), L in [0, 100]; differentiable.
+
+    The same conversion as OpenCV's float ``COLOR_RGB2Lab`` (sRGB gamma, D65 white).
+    The cube root is replaced by its linear segment below (6/29)^3 as the standard
+    prescribes, so gradients stay finite at black.
+    """
+    x = rgb.clamp(0.0, 1.0)
+    lin = torch.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
+    xyz = torch.einsum("ij,bjhw->bihw", _SRGB_TO_XYZ.to(x), lin)
+    xyz = xyz / torch.tensor(_WHITE, dtype=x.dtype, device=x.device)[None, :, None, None]
+    d = 6.0 / 29.0
+    f = torch.where(xyz > d**3, xyz.clamp_min(d**3) ** (1.0 / 3.0), xyz / (3 * d * d) + 4.0 / 29.0)
+    fx, fy, fz = f[:, 0], f[:, 1], f[:, 2]
+    return torch.stack([116.0 * fy - 16.0, 500.0 * (fx - fy), 200.0 * (fy - fz)], dim=1)
+
+
+def lab_statistics(rgb: torch.Tensor, eps: float = 1e-6) -> torch.Tensor:
+    """Per-image mean and std of L*, a*, b* over all pixels: (B, 6) = (mean L, a, b, std L, a, b)."""
+    lab = rgb_to_lab(rgb).flatten(2)  # (B, 3, HW)
+    return torch.cat([lab.mean(-1), torch.sqrt(lab.var(-1, unbiased=False) + eps)], dim=1)
+
+
+def colour_statistics_loss(pred: torch.Tensor, style: torch.Tensor) -> torch.Tensor:
+    """Mean absolute difference of :func:`lab_statistics`, in units of 100 (L*'s range): a scalar.
+
+    ``pred`` (B, 3, H, W), ``style`` (B or 1, 3, h, w), both in [0, 1]: the colour
+    statistics of every view are pulled towards the style image's.
+    """
+    a, b = lab_statistics(pred), lab_statistics(style)
+    if b.shape[0] not in (1, a.shape[0]):
+        raise InputError("style", f"batch {b.shape[0]} does not match prediction batch {a.shape[0]}")
+    return (a - b).abs().mean() / 100.0

@@ -13,6 +13,8 @@
   (:mod:`.teacher`, ``--teacher``), a fraction of the stylized samples use the
   style the 2D network baked onto that sample's points, and add an L1 +
   perceptual loss against those baked colours rendered into the target views.
+  Every stylized view's L*a*b* colour statistics are also pulled towards the
+  style image's (``LossWeights.colour``).
 
 Consistency loss: a random subset of the sample's points is
 projected into every predicted view; for every pair of views, the L1 difference
@@ -46,7 +48,7 @@ from ..errors import InputError
 from ..io.atomic import atomic_path
 from ..models.checkpoint import load_checkpoint, save_checkpoint
 from ..models.efficientnet_lite import EfficientNetLiteFeatures
-from ..models.losses import PerceptualLoss, PerceptualLossConfig, StylizationLoss
+from ..models.losses import PerceptualLoss, PerceptualLossConfig, StylizationLoss, colour_statistics_loss
 from ..models.style_features import StyleEncoder
 from ..models.stylize3d import ConfigName, ModelConfig, Stylize3DModel, add_detail_path
 from ..render.reproject import pairwise_consistency, sample_view
@@ -77,6 +79,8 @@ class LossWeights:
         consistency_stylized: stage 2, multi-view consistency L1 of stylized views (raw ~0.007). Default 50.
         teacher: stage 2 teacher samples, L1 against the baked teacher targets (masked). Default 1.
         teacher_perceptual: stage 2 teacher samples, EfficientNet feature L1 against them. Default 0.05.
+        colour: stage 2, L*a*b* mean/std of every stylized view against the style image's
+            (:func:`~stylize3d_core.models.losses.colour_statistics_loss`, raw ~0.1-0.3). Default 0.5.
     """
 
     l1: float = 1.0
@@ -87,6 +91,7 @@ class LossWeights:
     consistency_stylized: float = 50.0
     teacher: float = 1.0
     teacher_perceptual: float = 0.05
+    colour: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -234,6 +239,8 @@ class TrainStep(nn.Module):
             st = self.stylization(pred, target, maps)
             terms["content"] = w.content * st.content
             terms["style"] = w.style * st.style
+            if w.colour:
+                terms["colour"] = w.colour * colour_statistics_loss(pred, style.unsqueeze(0))
             if teacher is not None:
                 t_target, t_mask = teacher[0].to(pred.device), teacher[1][:, None].to(pred.device, pred.dtype)
                 terms["teacher"] = w.teacher * ((pred - t_target).abs() * t_mask).sum() / (

@@ -216,3 +216,14 @@ def test_render_options_are_the_job_fields():
         if f.name not in ("photo", "ldi"):
             assert getattr(args, f.name) == getattr(job.spec, f.name), f.name
     assert args.photo == "p.jpg" and not hasattr(args, "ldi")
+
+
+def test_train_loss_weight_overrides_are_checked(capsys):
+    from app.cli import _loss_weights
+
+    w = _loss_weights(["colour=0", "teacher=2.5"])
+    assert w.colour == 0.0 and w.teacher == 2.5 and w.style == 0.1  # the others keep their defaults
+    for bad, words in (("bogus=1", "NAME one of"), ("colour", "NAME=VALUE"), ("colour=x", "not a number"),
+                       ("colour=-1", ">= 0"), ("colour=nan", ">= 0")):
+        assert main(["train", "--stage", "2", "--weight", bad]) == 2
+        assert words in capsys.readouterr().err

@@ -167,3 +167,29 @@ def test_bad_inputs(extractor):
         style_distance(torch.rand(2, 3, 32, 32), torch.rand(3, 3, 32, 32), extractor)
     with pytest.raises(InputError, match="features"):
         global_style_loss(feats, [f[:, :1] for f in feats], (1,))
+
+
+def test_rgb_to_lab_matches_opencv_and_colour_loss_has_finite_gradients():
+    import cv2
+    import numpy as np
+
+    from stylize3d_core.models.losses import colour_statistics_loss, lab_statistics, rgb_to_lab
+
+    g = np.random.default_rng(0)
+    x = g.random((6, 9, 3)).astype(np.float32)
+    x[0, 0], x[0, 1], x[0, 2] = 0.0, 1.0, 0.01  # black, white, near-black (the linear segment)
+    ours = rgb_to_lab(torch.from_numpy(x).permute(2, 0, 1)[None])[0].permute(1, 2, 0).numpy()
+    np.testing.assert_allclose(ours, cv2.cvtColor(x, cv2.COLOR_RGB2Lab), atol=0.5)
+    assert abs(ours[0, 1, 0] - 100.0) < 0.01 and abs(ours[0, 0]).max() < 0.01  # white L 100, black 0
+    # statistics of a constant image: its Lab colour and zero spread
+    red = torch.zeros(1, 3, 4, 4)
+    red[:, 0] = 1.0
+    stats = lab_statistics(red)[0]
+    np.testing.assert_allclose(stats[:3].numpy(), cv2.cvtColor(np.array([[[1.0, 0, 0]]], np.float32),
+                                                               cv2.COLOR_RGB2Lab)[0, 0], atol=0.5)
+    assert stats[3:].max() < 0.01
+    assert colour_statistics_loss(red, red) < 1e-4
+    pred = torch.rand(2, 3, 8, 8, requires_grad=True)
+    loss = colour_statistics_loss(pred, torch.zeros(1, 3, 5, 5))  # towards black: a large distance
+    loss.backward()
+    assert loss > 0.2 and torch.isfinite(pred.grad).all() and pred.grad.abs().sum() > 0

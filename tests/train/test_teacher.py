@@ -116,7 +116,7 @@ def test_stage2_with_the_teacher_reduces_the_teacher_loss(data, tmp_path):
                       teacher_dir=str(teacher), teacher_fraction=1.0, seed=0)
     train(cfg, log=lambda _: None)
     log = [json.loads(line) for line in (out / "log_stage2.jsonl").read_text().splitlines()]
-    assert {"teacher", "teacher_perceptual", "content", "style", "consistency"} <= set(log[0])
+    assert {"teacher", "teacher_perceptual", "content", "style", "colour", "consistency"} <= set(log[0])
     assert log[-1]["teacher"] < 0.8 * log[0]["teacher"]
     with pytest.raises(InputError, match="stage 2"):
         TrainConfig(stage=1, teacher_dir=str(teacher))
