@@ -78,6 +78,9 @@ def _add_training(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--log-every", type=int, default=d.log_every)
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     p.add_argument("--seed", type=int, default=d.seed)
+    p.add_argument("--recon-fraction", type=float, default=d.recon_fraction,
+                   help=f"stage 2: share of steps that train strength 0 with the stage-1 loss "
+                        f"(default {d.recon_fraction})")
     p.add_argument("--weight", action="append", default=[], metavar="NAME=VALUE",
                    help="override a loss weight (LossWeights field, e.g. colour=0); repeatable")
     p.add_argument("--teacher", default=None, help="stage 2: a prepare-teacher folder for --data (default: none)")
@@ -190,7 +193,8 @@ def _train(args: argparse.Namespace) -> int:
         iterations=args.iterations, batch_size=args.batch_size, lr=args.lr, lr_schedule=args.lr_schedule,
         checkpoint_every=args.checkpoint_every, log_every=args.log_every,
         max_hours=args.hours, init=args.init, init_stylizer=args.init_stylizer, seed=args.seed,
-        threads=args.threads, weights=_loss_weights(args.weight), teacher_dir=args.teacher, teacher_fraction=args.teacher_fraction,
+        threads=args.threads, weights=_loss_weights(args.weight), recon_fraction=args.recon_fraction,
+        teacher_dir=args.teacher, teacher_fraction=args.teacher_fraction,
     )
     path = train(config, log=lambda msg: print(f"{PROG}: {msg}", file=sys.stderr, flush=True))
     print(f"{PROG}: checkpoint {path}", file=sys.stderr)
