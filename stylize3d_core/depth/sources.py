@@ -20,9 +20,10 @@ spec (command line ``--depth``)     source
 ``stereo:sbs`` / ``stereo:sbs:cross``  :class:`StereoDepth`: the photo is a side-by-side
                                     stereo card (parallel / cross-eyed); the photo used
                                     is its left view, returned as ``PhotoDepth.rgb``
-``stereo:card``                     :class:`StereoCardDepth`: a scanned historical card
-                                    (mount borders, exposure, rotation: :mod:`.stereo_card`);
-                                    the photo used is its cropped left print
+``stereo:card`` / ``stereo:card:cross``  :class:`StereoCardDepth`: a scanned historical card
+                                    (mount borders, exposure, rotation: :mod:`.stereo_card`;
+                                    parallel / cross-eyed); the photo used is its cropped
+                                    left-eye print
 =================================  =================================================
 
 Any source can be followed by edge alignment (:mod:`.refine`) by wrapping it in
@@ -50,7 +51,7 @@ from .types import DepthMap, PhotoDepth
 
 SPEC_HELP = (
     "auto, prior, phone, FILE, FILE:disparity, onnx:MODEL.onnx[:PRESET], stereo:RIGHT_IMAGE, stereo:sbs[:cross], "
-    "stereo:card"
+    "stereo:card[:cross]"
 )
 
 
@@ -202,7 +203,7 @@ class StereoCardDepth(DepthSource):
         return card_depth(image.rgb, self.settings, image.path if image.path is not None else "stereo card")
 
     def describe(self) -> str:
-        return "scanned stereo card"
+        return "scanned stereo card" + (" (cross-eyed)" if self.settings.stereo.cross_eyed else "")
 
 
 class PhoneDepth(DepthSource):
@@ -298,8 +299,8 @@ def parse_depth_spec(spec: str, *, refine: Optional[RefineSettings] = None) -> D
         source = OnnxDepth(model, preset)
     elif s.startswith("stereo:"):
         rest = s[len("stereo:"):]
-        if rest == "card":
-            source = StereoCardDepth()
+        if rest in ("card", "card:cross"):
+            source = StereoCardDepth(CardSettings(stereo=StereoSettings(cross_eyed=rest == "card:cross")))
         elif rest in ("sbs", "sbs:cross"):
             source = StereoDepth(None, StereoSettings(cross_eyed=rest == "sbs:cross"), side_by_side=True)
         elif not rest:

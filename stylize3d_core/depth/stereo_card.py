@@ -62,7 +62,8 @@ class CardSettings:
     margin_px: float = 2.0
     """Disparity given to the farthest matches (1st percentile) after rectification."""
     stereo: StereoSettings = StereoSettings()
-    """The matcher's settings; its disparity range is set from the matches."""
+    """The matcher's settings; its disparity range is set from the matches. With ``stereo.cross_eyed``
+    the card's right print is the left eye's (the prints are swapped after splitting)."""
 
     def __post_init__(self) -> None:
         check_range(self.border_tolerance, "border_tolerance", 0.0, 1.0)
@@ -83,7 +84,7 @@ class CardViews(NamedTuple):
         scale: its scale relative to the left one.
         matches: feature matches consistent with the rectification.
         disparity_range: (low, high) disparities of the matches after rectification, in pixels.
-        boxes: the (top, bottom, left, right) crop of each print on the card.
+        boxes: the (top, bottom, left, right) crop of each print on the card, left eye first.
     """
 
     left: np.ndarray
@@ -188,6 +189,8 @@ def card_views(card: np.ndarray, settings: CardSettings = CardSettings(), name: 
     """Split, match and rectify a scanned stereo card (steps 1-4 of the module docstring)."""
     s = settings
     left, right, boxes = split_card(card, s, name)
+    if s.stereo.cross_eyed:  # a cross-eyed card shows the left eye's print on the right
+        left, right, boxes = right, left, (boxes[1], boxes[0])
     right = match_exposure(right, left)
     pl, pr = _matches(left, right, s)
     not_card = f"does not look like a side-by-side stereo card: its halves share only {{}} consistent features " \

@@ -48,6 +48,27 @@ def test_card_depth_finds_the_near_box(card):
     assert found.depth_map.valid.mean() > 0.7
 
 
+def test_cross_eyed_card_swaps_the_prints(card):
+    """A cross-eyed card (left eye's print on the right) gives the parallel card's photo and depth."""
+    from stylize3d_core.depth.stereo import StereoSettings
+
+    image, left_truth, box = card
+    w = image.shape[1] // 2 * 2
+    crossed = np.concatenate([image[:, w // 2:w], image[:, :w // 2]], axis=1)
+    cross = CardSettings(stereo=StereoSettings(cross_eyed=True))
+    views = card_views(crossed, cross)
+    assert np.abs(views.left - left_truth).mean() < 0.02
+    assert views.boxes[0][2] >= w // 2  # the left eye's print sat on the right half
+    assert abs(views.rotation_deg - ROTATION) < 0.2
+    d = card_depth(crossed, cross).depth_map.depth
+    near = np.median(d[70:190, 80:160])
+    far = np.median(np.concatenate([d[5:50].ravel(), d[:, 200:].ravel()]))
+    assert near < 0.6 * far
+    source = parse_depth_spec("stereo:card:cross")
+    assert isinstance(source, StereoCardDepth) and source.settings.stereo.cross_eyed
+    assert "cross" in source.describe()
+
+
 def test_exposure_matching():
     g = np.random.default_rng(0)
     ref = g.random((20, 20, 3)).astype(np.float32)
