@@ -80,7 +80,7 @@ class LossWeights:
         teacher: stage 2 teacher samples, L1 against the baked teacher targets (masked). Default 1.
         teacher_perceptual: stage 2 teacher samples, EfficientNet feature L1 against them. Default 0.05.
         colour: stage 2, L*a*b* mean/std of every stylized view against the style image's
-            (:func:`~stylize3d_core.models.losses.colour_statistics_loss`, raw ~0.1-0.3). Default 0.5.
+            (:func:`~stylize3d_core.models.losses.colour_statistics_loss`, raw ~0.02-0.3). Default 2.
     """
 
     l1: float = 1.0
@@ -91,7 +91,7 @@ class LossWeights:
     consistency_stylized: float = 50.0
     teacher: float = 1.0
     teacher_perceptual: float = 0.05
-    colour: float = 0.5
+    colour: float = 2.0
 
 
 @dataclass(frozen=True)
