@@ -390,8 +390,8 @@ class ApplicationsController(Controller):
         self.mask_source = layers.source
         kept = "original colours" if layers.foreground_strength is None else \
             f"strength {layers.foreground_strength:.2f}"
-        note = "" if w.state.stylize_available else " (shown once the model is ready and a style is chosen)"
-        w.set_busy(f"Foreground from {layers.source}: {layers.fraction:.0%} of the photo kept at {kept}{note}", None)
+        note = "" if w.state.stylize_available else " (once stylized)"
+        w.set_busy(f"Foreground from {layers.source}: {layers.fraction:.0%}, {kept}{note}", None)
         w.view_changed()
 
     @ui_callback

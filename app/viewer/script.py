@@ -31,7 +31,7 @@ seconds, move, delete, loop), ``save_keyframes`` / ``load_keyframes`` (path),
 ``preview_keys``, ``open_section`` (name), ``save_as`` (what, text: types a
 path into a Save dialog), ``style_strip`` (index), ``mix`` (path, value),
 ``compare`` (split, on), ``app_menu`` (item, fields, ok, save_as, grab: an Applications menu item
-and its dialogs), ``quit``.
+and its dialogs), ``app_call`` (method, its arguments), ``quit``.
 """
 
 from __future__ import annotations
@@ -383,6 +383,15 @@ class ScriptRunner:
             self.op_wait_worker(timeout)
             self._wait_while(lambda: w.exports.exporting, timeout, "the export did not finish", 0.1)
             self.op_wait_worker(timeout)
+        return {"dialog_open": self.main(lambda: w.dialog_open), "status": self.main(lambda: w.panel.status.text)}
+
+    def op_app_call(self, method: str, wait: bool = True, **kwargs: Any) -> Dict[str, Any]:
+        """Call ``window.applications.<method>(**kwargs)`` on the main thread (e.g. ``open_views`` with a
+        path, ``dialog_ok``), then wait for the worker (with ``wait``)."""
+        w = self.window
+        self.main(lambda: getattr(w.applications, method)(**kwargs))
+        if wait:
+            self.op_wait_worker()
         return {"dialog_open": self.main(lambda: w.dialog_open), "status": self.main(lambda: w.panel.status.text)}
 
     def op_style_strip(self, index: int = 0) -> Dict[str, Any]:

@@ -4,11 +4,12 @@ The controller runs against a stand-in window whose worker runs each task at
 once on the calling thread, with a real :class:`~app.viewer.session.ViewerSession`
 (the sample photo, an untrained model) and the real camera-path and export
 controllers: each menu action's library call is made and its files read back.
-The window itself is driven by ``test_viewer_applications_gui`` below (Xvfb).
+The window itself is driven by ``test_viewer_applications_gui`` at the end (Xvfb).
 """
 
 from __future__ import annotations
 
+import importlib.util
 import json
 from dataclasses import replace
 from pathlib import Path
@@ -35,6 +36,18 @@ from stylize3d_core.pipeline import PhotoSpec
 from stylize3d_core.render.plain import frame_size
 
 MAX_SIZE = 96
+
+
+def _gui_helpers():
+    """tests/app/test_viewer_gui.py's Xvfb fixture and viewer runner (the tests import in importlib mode)."""
+    spec = importlib.util.spec_from_file_location("viewer_gui_helpers", Path(__file__).with_name("test_viewer_gui.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+_GUI = _gui_helpers()
+display = _GUI.display  # the module's private Xvfb (a fixture)
 
 
 class SyncWorker:
@@ -371,3 +384,46 @@ def test_actions_need_a_photo(untrained):
         w.applications.grabcut(A.DEFAULT_RECT)
     with pytest.raises(InputError, match="open a photo first"):
         A.layers_from_file(s, "m.png", 0.0)
+
+
+# -- the window under Xvfb ----------------------------------------------------------------------
+@pytest.mark.gui
+@pytest.mark.slow
+def test_viewer_applications_gui(display, untrained, tmp_path):
+    """The real window: GrabCut from the Applications menu's dialog, a layered view, a half-width
+    side-by-side export and a baked PLY through the menu's Save dialogs, then the mask cleared."""
+    steps = [
+        {"op": "load_sample"},
+        {"op": "wait_idle", "timeout": 180},
+        {"op": "app_menu", "item": "MENU_GRABCUT", "ok": True,
+         "fields": {"left": 0.25, "top": 0.05, "right": 0.75, "bottom": 1.0, "strength": 0.0},
+         "grab": str(tmp_path / "grabcut_dialog.png")},
+        {"op": "wait_idle", "timeout": 180},
+        {"op": "screenshot", "path": str(tmp_path / "layered.png")},
+        {"op": "set_export", "frames": 4, "size": 96, "fps": 8},
+        {"op": "app_menu", "item": "MENU_SBS", "ok": True, "fields": {"layout": 1, "eye_distance": 0.01},
+         "save_as": str(tmp_path / "sbs.mp4")},
+        {"op": "app_menu", "item": "MENU_PLY", "save_as": str(tmp_path / "cloud.ply")},
+        {"op": "app_menu", "item": "MENU_ANAGLYPH", "ok": True, "fields": {"eye_distance": 0.9},
+         "save_as": str(tmp_path / "inside.mp4")},
+        {"op": "expect_error", "contains": "camera"},
+        {"op": "app_menu", "item": "MENU_MASK_CLEAR"},
+        {"op": "wait_idle", "timeout": 180},
+        {"op": "screenshot", "path": str(tmp_path / "cleared.png")},
+        {"op": "quit"},
+    ]
+    code, report = _GUI.run_viewer(display, tmp_path, steps, ["--model", str(untrained)])
+    _GUI.check_ran(code, report)
+    assert "GrabCut" in _GUI.step(report, "app_menu", 0)["result"]["status"]
+    assert [e for e in report["errors"] if "camera" in e] and len(report["errors"]) == 1, report["errors"]
+    sbs = iio.imread(tmp_path / "sbs.mp4", index=None)
+    assert sbs.shape[0] == 4 and sbs.shape[2] == 96  # half width: the two eyes squeezed into one frame
+    assert len(read_vertex_properties(tmp_path / "cloud.ply")["x"]) > 10_000
+    assert not (tmp_path / "inside.mp4").exists()
+    layered, cleared = (np.asarray(Image.open(tmp_path / n).convert("RGB"), np.float32) for n in
+                        ("layered.png", "cleared.png"))
+    h, w = layered.shape[:2]
+    diff = np.abs(layered - cleared).mean(-1)
+    centre = diff[h // 4: 3 * h // 4, 3 * w // 8: 5 * w // 8].mean()
+    edges = np.concatenate([diff[:, : w // 8].ravel(), diff[:, -w // 8:].ravel()]).mean()
+    assert centre > 3 * edges + 2.0, (centre, edges)  # only the foreground changed
