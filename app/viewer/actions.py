@@ -33,7 +33,8 @@ from typing import TYPE_CHECKING, Any, Callable, Optional
 import open3d.visualization.gui as gui
 
 from stylize3d_core.errors import InputError
-from stylize3d_core.io.camera_path import CameraPath, load_camera_path, save_camera_path
+from stylize3d_core.export.camera_paths import read_camera_path
+from stylize3d_core.io.camera_path import CameraPath, save_camera_path
 from stylize3d_core.io.keyframes import load_keyframes, save_keyframes
 from stylize3d_core.io.images import save_image
 from stylize3d_core.io.video import ExportCancelled
@@ -398,7 +399,7 @@ class CameraPathController(Controller):
 
     def load_camera_path(self, path: str) -> None:
         """Read a camera-path JSON on the worker and use it for the preview and export."""
-        self.submit("load camera path", lambda: load_camera_path(path), lambda cp: self._path_loaded(path, cp))
+        self.submit("load camera path", lambda: read_camera_path(path), lambda cp: self._path_loaded(path, cp))
 
     def _path_loaded(self, path: str, cp: CameraPath) -> None:
         w = self.window
@@ -599,9 +600,20 @@ class ExportController(Controller):
         dest = export_destination(path, e.format)
         job = ExportJob(dest, self.paths.export_cameras(), frame_size(s.photo_info.size, e.size), e.fps,
                         shows_stylized(s))
+        session = w.session
+        return self.run_export(dest, f"Exporting {len(job.cameras)} frames to {dest} ...", len(job.cameras),
+                               lambda progress, between: session.export(job, progress, between))
+
+    def run_export(self, dest: str, text: str, n: int,
+                   work: Callable[[Callable[[int, Optional[int]], None], Callable[[], object]], Any]) -> str:
+        """Run ``work(progress, between_frames)`` on the worker as the export to ``dest`` (``n`` frames
+        expected): progress on the bar, Cancel (``progress`` raises ExportCancelled once it is pressed),
+        views rendered between frames (``between_frames``), the error dialog on failure. Returns ``dest``."""
+        w = self.window
+        if self.exporting:
+            raise InputError("export", "an export is already running")
         cancel = self._cancel = threading.Event()
         t0 = time.monotonic()
-        n = len(job.cameras)
 
         def progress(done: int, total: Optional[int]) -> None:
             if cancel.is_set():
@@ -611,9 +623,9 @@ class ExportController(Controller):
 
         w.panel.cancel.enabled = True
         w.panel.export.enabled = False
-        w.set_busy(f"Exporting {len(job.cameras)} frames to {dest} ...", 0.0)
-        session, worker = w.session, w.worker
-        worker.submit("export", lambda: session.export(job, progress, worker.serve_pending_render),
+        w.set_busy(text, 0.0)
+        worker = w.worker
+        worker.submit("export", lambda: work(progress, worker.serve_pending_render),
                       on_done=lambda out: w.post(lambda: self._done(str(out), None)),
                       on_error=lambda name, err: w.post(lambda: self._done(dest, err)))
         return dest

@@ -90,6 +90,8 @@ def build_menubar() -> gui.Menu:
     bar = gui.Menu()
     bar.add_menu("File", file_menu)
     bar.add_menu("View", view_menu)
+    from .applications import build_applications_menu  # (it imports this module)
+    bar.add_menu("Applications", build_applications_menu())
     bar.add_menu("Help", help_menu)
     return bar
 

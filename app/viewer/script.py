@@ -30,7 +30,8 @@ view state), ``status`` (exporting, dialog open, closing, render phase),
 seconds, move, delete, loop), ``save_keyframes`` / ``load_keyframes`` (path),
 ``preview_keys``, ``open_section`` (name), ``save_as`` (what, text: types a
 path into a Save dialog), ``style_strip`` (index), ``mix`` (path, value),
-``compare`` (split, on), ``quit``.
+``compare`` (split, on), ``app_menu`` (item, fields, ok, save_as, grab: an Applications menu item
+and its dialogs), ``app_call`` (method, its arguments), ``quit``.
 """
 
 from __future__ import annotations
@@ -339,6 +340,59 @@ class ScriptRunner:
         still_open = self.main(type_and_save)
         self.op_wait_worker()
         return {"dialog_open": still_open, "status": self.main(lambda: w.panel.status.text)}
+
+    def op_app_menu(self, item: Any, fields: Optional[Dict[str, Any]] = None, ok: bool = False,
+                    save_as: Optional[str] = None, grab: Optional[str] = None, wait: bool = True,
+                    timeout: float = 300.0) -> Dict[str, Any]:
+        """Activate an Applications menu item (``item``: a ``MENU_*`` name or id of app/viewer/applications.py)
+        as the menu does; set the fields of the dialog it opens (name -> a slider's or number's value, a
+        combo's index, a checkbox's state), save the window to ``grab`` (PNG), press the dialog's OK with
+        ``ok``, type ``save_as`` into the Save dialog that follows and press Save; then wait for the worker
+        and any export."""
+        import open3d.visualization.gui as gui
+
+        from . import applications as A
+
+        w = self.window
+        item_id = getattr(A, item) if isinstance(item, str) else int(item)
+        self.main(w.applications.menu_callbacks()[item_id])
+
+        def fill() -> None:
+            for name, value in (fields or {}).items():
+                widget = w.applications.dialog_fields[name]
+                if isinstance(widget, (gui.Slider, gui.NumberEdit)):
+                    widget.double_value = float(value)
+                elif isinstance(widget, gui.Combobox):
+                    widget.selected_index = int(value)
+                else:
+                    widget.checked = bool(value)
+
+        self.main(fill)
+        if grab:
+            time.sleep(0.3)
+            self.op_grab_window(grab)
+        if ok:
+            self.main(lambda: w.applications.dialog_ok())
+        if save_as is not None:
+            def type_and_save() -> None:
+                w.save_as_edit.text_value = save_as
+                w._save_as_ok()
+
+            self.main(type_and_save)
+        if wait:
+            self.op_wait_worker(timeout)
+            self._wait_while(lambda: w.exports.exporting, timeout, "the export did not finish", 0.1)
+            self.op_wait_worker(timeout)
+        return {"dialog_open": self.main(lambda: w.dialog_open), "status": self.main(lambda: w.panel.status.text)}
+
+    def op_app_call(self, method: str, wait: bool = True, **kwargs: Any) -> Dict[str, Any]:
+        """Call ``window.applications.<method>(**kwargs)`` on the main thread (e.g. ``open_views`` with a
+        path, ``dialog_ok``), then wait for the worker (with ``wait``)."""
+        w = self.window
+        self.main(lambda: getattr(w.applications, method)(**kwargs))
+        if wait:
+            self.op_wait_worker()
+        return {"dialog_open": self.main(lambda: w.dialog_open), "status": self.main(lambda: w.panel.status.text)}
 
     def op_style_strip(self, index: int = 0) -> Dict[str, Any]:
         """Click thumbnail ``index`` of the style strip (applies that style)."""

@@ -37,6 +37,7 @@ from stylize3d_core.pipeline import PhotoSpec, load_photo3d
 from stylize3d_core.render.plain import PlainRenderer, PlainRenderSettings
 from stylize3d_core.scene.photo3d import Photo3D
 
+from .layers import ViewerLayers
 from .orbit import OrbitScene
 from .state import PhotoInfo
 
@@ -134,6 +135,7 @@ class ViewerSession:
         self.style2_path: Optional[str] = None
         self._style2_rgb: Optional[np.ndarray] = None
         self.mix = 0.0
+        self.layers: Optional[ViewerLayers] = None  # a foreground kept unstylized (layered stylization)
 
     # -- model --------------------------------------------------------------------
     def checkpoint_path(self) -> Optional[Path]:
@@ -163,14 +165,21 @@ class ViewerSession:
     def load_photo(self, spec: PhotoSpec) -> PhotoInfo:
         """Build the 3D photo ``spec`` describes; on any error the current photo stays loaded."""
         t0 = time.perf_counter()
-        photo = load_photo3d(spec)
+        return self.set_photo(load_photo3d(spec), str(spec.photo), t0)
+
+    def set_photo(self, photo: Photo3D, name: str, t0: Optional[float] = None) -> PhotoInfo:
+        """Make ``photo`` (built elsewhere: a merged multi-view photo) the current photo; ``name`` is its
+        file, ``t0`` when building began (``time.perf_counter``). A foreground mask (``layers``) is kept
+        for a rebuild of the same photo at the same size (carried by the new LDI), else dropped."""
+        t0 = time.perf_counter() if t0 is None else t0
         ldi = photo.ldi
         scene = OrbitScene.from_depths(ldi.depth[ldi.photo_region])
         plain = PlainRenderer(photo.points, self.plain_settings)
+        layers = None if self.layers is None else self.layers.rebase(photo, name)
         # Nothing failed: replace the old photo (and drop its encoding).
-        self.photo, self._plain, self._stylized = photo, plain, None
+        self.photo, self._plain, self._stylized, self.layers = photo, plain, None, layers
         self.colour_gain = None
-        self.info = PhotoInfo(str(spec.photo), tuple(photo.size), plain.num_points, float(photo.fov_y_deg),
+        self.info = PhotoInfo(name, tuple(photo.size), plain.num_points, float(photo.fov_y_deg),
                               photo.depth.source, scene, time.perf_counter() - t0)
         return self.info
 
@@ -244,6 +253,10 @@ class ViewerSession:
         """
         if self.photo is None:
             raise InputError("photo", "open a photo first")
+        if stylized and self._stylized is not None and self.layers is not None:
+            if should_stop is not None and should_stop():
+                raise RenderInterrupted("render stopped before the layered composition")
+            return self.layers.renderer(self._stylized, self.strength).render(camera, height, width, preview=preview)
         if stylized and self._stylized is not None:
             return self._stylized.render(camera, height, width, preview=preview, should_stop=should_stop)
         if should_stop is not None and should_stop():
@@ -279,7 +292,7 @@ class ViewerSession:
         if self._preview_hw is None or self._stylized is None:
             return None
         h, w = self._preview_hw
-        small = self._stylized.render(camera, h, w, preview=True)
+        small = self.render(camera, h, w, preview=True, stylized=True)
         m_full = full.reshape(-1, 3).mean(0)
         m_prev = small.reshape(-1, 3).mean(0)
         self.colour_gain = np.clip(m_full / np.maximum(m_prev, 1e-3), 0.8, 1.25).astype(np.float32)

@@ -43,6 +43,7 @@ from stylize3d_core.render.plain import frame_size
 
 from . import panel as P
 from .actions import CameraPathController, ExportController, PhotoController, ui_callback
+from .applications import ApplicationsController
 from .orbit import HOME, OrbitLimits, apply_drag, apply_wheel, orbit
 from .session import NO_MODEL, ViewerSession, ViewFrame
 from .render_state import RenderStateMachine
@@ -111,6 +112,7 @@ class ViewerWindow:
         self.photos = PhotoController(self)
         self.paths = CameraPathController(self)
         self.exports = ExportController(self, self.paths)
+        self.applications = ApplicationsController(self)  # the Applications menu (app/viewer/applications.py)
         self.errors: List[str] = []
         self.stats: Dict[str, Any] = {"preview_seconds": [], "full_seconds": [], "full_latency": [], "preview_shown": [],
                                       "preview_latency": [], "post_delay": [], "mouse_down": [],
@@ -203,6 +205,7 @@ class ViewerWindow:
             P.MENU_STYLIZED: self._on_stylized_menu, P.MENU_RESET: self._on_reset_view,
             P.MENU_PREVIEW: cp.toggle_preview, P.MENU_HELP: self._on_help, P.MENU_ABOUT: self._on_about,
         }
+        menu.update(self.applications.menu_callbacks())
         for item, cb in menu.items():
             w.set_on_menu_item_activated(item, cb)
 
