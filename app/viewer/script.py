@@ -332,13 +332,51 @@ class ScriptRunner:
         self.main(opener)
 
         def type_and_save() -> bool:
-            w.save_as_edit.text_value = text
-            w._save_as_ok()
+            w.path_edit.text_value = text
+            w._path_ok()
             return w.dialog_open
 
         still_open = self.main(type_and_save)
         self.op_wait_worker()
         return {"dialog_open": still_open, "status": self.main(lambda: w.panel.status.text)}
+
+    def op_open_as(self, what: str, text: str) -> Dict[str, Any]:
+        """Open an Open dialog ("photo", "style", "camera_path") as its shortcut does, type ``text`` in its
+        path field and press Open; reports whether a dialog is still open (the error's) and the errors."""
+        w = self.window
+        opener = {"photo": w.photos.on_open_photo, "style": w.photos.on_open_style,
+                  "camera_path": w.paths.on_load_path}[what]
+        self.main(opener)
+
+        def type_and_open() -> Dict[str, Any]:
+            w.path_edit.text_value = text
+            w._path_ok()
+            return {"dialog_open": w.dialog_open, "errors": list(w.errors)}
+
+        out = self.main(type_and_open)
+        self.op_wait_worker()
+        return out
+
+    def op_recent(self, kind: str = "photo", index: int = 0) -> Dict[str, Any]:
+        """Choose entry ``index`` of File > Recent photos / styles (as the menu item does)."""
+        w = self.window
+        base = P.MENU_RECENT_PHOTO if kind == "photo" else P.MENU_RECENT_STYLE
+
+        def choose() -> None:
+            paths = w.settings.recent_photos if kind == "photo" else w.settings.recent_styles
+            w.open_recent(paths, int(index), w.photos.open_photo if kind == "photo" else w.photos.open_style)
+
+        self.main(choose)
+        self.op_wait_worker()
+        return {"menu_id": base + int(index), **self.op_settings()}
+
+    def op_settings(self) -> Dict[str, Any]:
+        """The remembered settings (recent photos and styles, last folder) and the settings file's path."""
+        from .settings import settings_path
+
+        st = self.main(lambda: self.window.settings)
+        return {"recent_photos": list(st.recent_photos), "recent_styles": list(st.recent_styles),
+                "last_folder": st.last_folder, "settings_file": str(settings_path())}
 
     def op_style_strip(self, index: int = 0) -> Dict[str, Any]:
         """Click thumbnail ``index`` of the style strip (applies that style)."""

@@ -171,7 +171,7 @@ class ViewerSession:
         self.photo, self._plain, self._stylized = photo, plain, None
         self.colour_gain = None
         self.info = PhotoInfo(str(spec.photo), tuple(photo.size), plain.num_points, float(photo.fov_y_deg),
-                              photo.depth.source, scene, time.perf_counter() - t0)
+                              photo.depth.source, scene, time.perf_counter() - t0, photo.camera_range)
         return self.info
 
     def prepare_stylized(self) -> StylizeInfo:

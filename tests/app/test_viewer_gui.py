@@ -555,3 +555,52 @@ def test_real_wheel_up_moves_forwards(display, tmp_path):
     code, report = run_viewer(display, tmp_path, steps, ["--no-model"], during=interact)
     check_ran(code, report)
     assert step(report, "state")["result"]["pose"]["dolly"] > 0, "wheel up did not move forwards"
+
+
+def test_typed_paths_in_open_dialogs_and_recent_files_kept_between_runs(display, tmp_path, settings_dir):
+    sample = REPO / "assets" / "samples" / "coffee.jpg"
+    for folder, name in (("photos", "cat.jpg"), ("photos2", "dog.jpg")):
+        (tmp_path / folder).mkdir()
+        shutil.copy(sample, tmp_path / folder / name)
+    first = tmp_path / "first"
+    first.mkdir()
+    steps = [
+        {"op": "open_as", "what": "photo", "text": str(tmp_path / "photos" / "cat.jpg")},  # absolute
+        {"op": "wait_idle", "timeout": 120},
+        {"op": "open_as", "what": "photo", "text": "missing.jpg"},  # relative to the last folder: not there
+        {"op": "expect_error", "contains": "no such file"},
+        {"op": "open_as", "what": "photo", "text": "../photos2/dog.jpg"},  # relative to the last folder
+        {"op": "wait_idle", "timeout": 120},
+        {"op": "state"},
+        {"op": "settings"},
+        {"op": "quit"},
+    ]
+    code, report = run_viewer(display, first, steps, ["--no-model"])
+    check_ran(code, report)
+    missing = step(report, "open_as", 1)["result"]
+    assert any(str(tmp_path / "photos" / "missing.jpg") + ": no such file" in e for e in missing["errors"])
+    assert step(report, "state")["result"]["spec"]["photo"] == str(tmp_path / "photos2" / "dog.jpg")
+    saved = step(report, "settings")["result"]
+    assert saved["settings_file"] == str(settings_dir / "viewer.json")
+    assert saved["recent_photos"] == [str(tmp_path / "photos2" / "dog.jpg"), str(tmp_path / "photos" / "cat.jpg")]
+    on_disk = json.loads((settings_dir / "viewer.json").read_text())
+    assert on_disk["recent_photos"] == saved["recent_photos"] and on_disk["last_folder"] == str(tmp_path / "photos2")
+
+    # A second run starts with them: File > Recent photos opens one; a recent file that is gone is forgotten.
+    (tmp_path / "photos2" / "dog.jpg").unlink()
+    second = tmp_path / "second"
+    second.mkdir()
+    steps = [
+        {"op": "settings"},
+        {"op": "recent", "kind": "photo", "index": 0},  # dog.jpg: deleted meanwhile
+        {"op": "expect_error", "contains": "no such file any more"},
+        {"op": "recent", "kind": "photo", "index": 0},  # now cat.jpg
+        {"op": "wait_idle", "timeout": 120},
+        {"op": "state"},
+        {"op": "quit"},
+    ]
+    code, report = run_viewer(display, second, steps, ["--no-model"])
+    check_ran(code, report)
+    assert step(report, "settings")["result"]["recent_photos"] == saved["recent_photos"]
+    assert step(report, "recent")["result"]["recent_photos"] == [str(tmp_path / "photos" / "cat.jpg")]
+    assert step(report, "state")["result"]["spec"]["photo"] == str(tmp_path / "photos" / "cat.jpg")
