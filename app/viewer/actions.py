@@ -182,7 +182,8 @@ class PhotoController(Controller):
         p.fov_label.text = f"Field of view: {info.fov_y_deg:.1f} degrees"
         self.window.paths.set_limits(trajectory_limits(info.camera_range, info.scene))
         p.set_enabled(True)
-        w.set_busy(f"3D photo ready in {info.seconds:.1f} s (depth: {info.depth_source})", 0.5)
+        narrow = "" if info.range_scale >= 0.995 else f"; camera range {100 * info.range_scale:.0f} %"
+        w.set_busy(f"3D photo ready in {info.seconds:.1f} s (depth: {info.depth_source}{narrow})", 0.5)
         w.photo_changed()  # requests the first (plain) frame
         p.model_label.text = "encoding the point cloud for the model ..."
         w.worker.submit("encode photo", w.session.prepare_stylized,

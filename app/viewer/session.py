@@ -171,7 +171,8 @@ class ViewerSession:
         self.photo, self._plain, self._stylized = photo, plain, None
         self.colour_gain = None
         self.info = PhotoInfo(str(spec.photo), tuple(photo.size), plain.num_points, float(photo.fov_y_deg),
-                              photo.depth.source, scene, time.perf_counter() - t0, photo.camera_range)
+                              photo.depth.source, scene, time.perf_counter() - t0, photo.camera_range,
+                              float(ldi.range_scale))
         return self.info
 
     def prepare_stylized(self) -> StylizeInfo:

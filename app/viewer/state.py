@@ -127,6 +127,8 @@ class PhotoInfo(NamedTuple):
     """The part of the viewer's camera range this photo shows cleanly (``Photo3D.camera_range``): the
     orbit limits (:meth:`~app.viewer.orbit.OrbitLimits.from_range`) and the trajectory limits
     (:func:`trajectory_limits`) come from it."""
+    range_scale: float = 1.0
+    """That part as a fraction of the full range (``LDI.range_scale``; 1: all of it)."""
 
 
 @dataclass(frozen=True)

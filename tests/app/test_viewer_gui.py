@@ -569,6 +569,7 @@ def test_typed_paths_in_open_dialogs_and_recent_files_kept_between_runs(display,
         {"op": "wait_idle", "timeout": 120},
         {"op": "open_as", "what": "photo", "text": "missing.jpg"},  # relative to the last folder: not there
         {"op": "expect_error", "contains": "no such file"},
+        {"op": "status"},
         {"op": "open_as", "what": "photo", "text": "../photos2/dog.jpg"},  # relative to the last folder
         {"op": "wait_idle", "timeout": 120},
         {"op": "state"},
@@ -579,6 +580,8 @@ def test_typed_paths_in_open_dialogs_and_recent_files_kept_between_runs(display,
     check_ran(code, report)
     missing = step(report, "open_as", 1)["result"]
     assert any(str(tmp_path / "photos" / "missing.jpg") + ": no such file" in e for e in missing["errors"])
+    assert not step(report, "status")["result"]["dialog_open"]
+    assert "Error" not in step(report, "status")["result"]["status"]  # the error's status line went with it
     assert step(report, "state")["result"]["spec"]["photo"] == str(tmp_path / "photos2" / "dog.jpg")
     saved = step(report, "settings")["result"]
     assert saved["settings_file"] == str(settings_dir / "viewer.json")

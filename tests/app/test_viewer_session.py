@@ -214,6 +214,8 @@ def test_the_photos_clean_camera_range_bounds_the_orbit(plain):
 
     rng = plain.info.camera_range
     assert rng == plain.photo.camera_range  # what the LDI reports it covers cleanly
+    assert plain.info.range_scale == pytest.approx(plain.photo.ldi.range_scale)
+    assert rng == CameraRange().scaled(plain.info.range_scale)  # (the default LDI settings' range, scaled)
     assert isinstance(rng, CameraRange) and 0 <= rng.max_yaw_deg <= CameraRange().max_yaw_deg
     limits = OrbitLimits.from_range(rng, deg_per_pixel=0.05)
     wild = clamp_pose(OrbitPose(yaw_deg=80.0, pitch_deg=-80.0, pan_x=5.0, dolly=-9.0), plain.info.scene, limits)
