@@ -66,12 +66,14 @@ class ViewerSettings:
     def with_photo(self, path: str) -> "ViewerSettings":
         """The settings after opening photo ``path`` (made absolute)."""
         p = os.path.abspath(os.path.expanduser(str(path)))
-        return replace(self, recent_photos=push_recent(self.recent_photos, p, MAX_RECENT), last_folder=os.path.dirname(p))
+        return replace(self, recent_photos=push_recent(self.recent_photos, p, MAX_RECENT),
+                       last_folder=os.path.dirname(p))
 
     def with_style(self, path: str) -> "ViewerSettings":
         """The settings after opening style ``path`` (made absolute)."""
         p = os.path.abspath(os.path.expanduser(str(path)))
-        return replace(self, recent_styles=push_recent(self.recent_styles, p, MAX_RECENT), last_folder=os.path.dirname(p))
+        return replace(self, recent_styles=push_recent(self.recent_styles, p, MAX_RECENT),
+                       last_folder=os.path.dirname(p))
 
     def without(self, path: str) -> "ViewerSettings":
         """The settings with ``path`` taken off both recent lists (it could not be opened)."""

@@ -299,7 +299,7 @@ PREVIEW_SAMPLES = 12
 def preview_cost_model(samples: Sequence[Tuple[int, float]]) -> Optional[Tuple[float, float]]:
     """``(a, b)`` of ``seconds ~ a + b * side**2`` fitted to recent previews ``(long side, seconds)``.
 
-    A preview's time is a fixed part (hand-over, display conversion, the decoder's per-call overhead)
+    A preview's time is a fixed part (display conversion, the decoder's and rasterizer's per-call overhead)
     plus a part that grows with the pixel count (rasterization and the U-Net decoder, per pixel). The
     median time of each size seen is used (robust to a spike of machine load); with two sizes or more
     the line is fitted by least squares, with one the fixed part is taken as zero (all time per pixel:

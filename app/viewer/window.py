@@ -50,8 +50,7 @@ from .session import NO_MODEL, ViewerSession, ViewFrame
 from .render_state import RenderStateMachine, refine_levels
 from .state import (
     PREVIEW_SAMPLES, VIEWER_MAX_SIZE, PreviewSettings, ViewState, choose_preview_long_side, clamp_state_pose,
-    full_frame_size,
-    resolve_open_path, resolve_typed_path, shows_stylized, view_camera, view_fov, wheel_ticks,
+    full_frame_size, resolve_open_path, resolve_typed_path, shows_stylized, view_camera, view_fov, wheel_ticks,
 )
 from .settings import MAX_RECENT, ViewerSettings, load_settings, save_settings
 from .worker import ComputeWorker, RenderResult
@@ -452,11 +451,10 @@ class ViewerWindow:
 
         if recent and not saving:
             box.add_child(gui.Label("Recent:"))
-            for path in recent[:MAX_RECENT]:
-                b = gui.Button(P.recent_label(path, recent.index(path)))
+            for i, path in enumerate(recent[:MAX_RECENT]):  # one click opens it (a missing one is forgotten)
+                b = gui.Button(P.recent_label(path, i))
                 b.horizontal_padding_em = 0.3
-                b.set_on_clicked(lambda p=path: self._run_chosen(title, on_done, p) if os.path.isfile(p) else
-                                 self.show_error(title, InputError(p, "no such file any more")))
+                b.set_on_clicked(lambda i=i: self.open_recent(recent, i, lambda p: self._run_chosen(title, on_done, p)))
                 box.add_child(b)
         row = gui.Horiz(0.5 * em)
         for label, cb in (("Browse...", browse), ("Cancel", self.close_dialog), ("Save" if saving else "Open", accept)):

@@ -9,9 +9,10 @@ import torch
 
 from app.viewer.orbit import HOME, OrbitPose, OrbitScene, cam_to_world
 from app.viewer.state import (
-    VIEWER_MAX_SIZE, ExportSettings, PhotoInfo, Playback, PreviewSettings, ViewState,
-    choose_preview_long_side, clamp_state_pose, preview_cost_model, export_destination, fov_range, full_frame_size, playback_frame,
-    clamp_trajectory, resolve_open_path, shows_stylized, trajectory_cameras, trajectory_limits, user_choices, view_camera, view_fov,
+    VIEWER_MAX_SIZE, ExportSettings, PhotoInfo, Playback, PreviewSettings, ViewState, choose_preview_long_side,
+    clamp_state_pose, clamp_trajectory, export_destination, fov_range, full_frame_size, playback_frame,
+    preview_cost_model, resolve_open_path, shows_stylized, trajectory_cameras, trajectory_limits, user_choices,
+    view_camera, view_fov,
 )
 from stylize3d_core.errors import InputError
 from stylize3d_core.geometry.camera_range import CameraRange
