@@ -173,7 +173,7 @@ def interactive(model: str, megapixels: float, full_side: int, tmp: str, max_siz
 
             def fn():
                 return s.render_view(cam, size, display, preview=preview, stylized=True,
-                                     should_stop=None if cancel is None else cancel.is_set)
+                                     should_stop=None if cancel is None else cancel.is_set, calibrate=scale >= 1.0)
 
             worker.request_render(fn, lambda r: shown.put((time.perf_counter(), version, scale, r)),
                                   preview=preview, cancel=cancel)

@@ -215,6 +215,7 @@ class Panel:
         self.mix.tooltip = "0: the first style, 1: the second"
         photo.add_child(self.mix)
         self.root.add_child(photo)
+        self.photo_section = photo
 
         # Look: stylized / original, strength, FOV, reset.
         look = gui.CollapsableVert("View", 0.3 * em, gui.Margins(int(0.5 * em), 0, 0, 0))
@@ -244,6 +245,7 @@ class Panel:
         for slider in (self.strength, self.fov, self.mix, self.split):  # the theme draws no track of its own
             slider.background_color = SLIDER_TRACK
         self.root.add_child(look)
+        self.view_section = look
 
         # Export.
         export = gui.CollapsableVert("Export", 0.3 * em, gui.Margins(int(0.5 * em), 0, 0, 0))
@@ -266,6 +268,7 @@ class Panel:
         self.export = gui.Button("Export... (E)")
         self.screenshot = gui.Button("Screenshot (P)")
         self.root.add_child(export)  # (its buttons are in the status area, always in sight)
+        self.export_section = export
 
         # Camera path: trajectory and its parameters, preview, load / save.
         path = gui.CollapsableVert("Camera path", 0.3 * em, gui.Margins(int(0.5 * em), 0, 0, 0))
@@ -292,6 +295,7 @@ class Panel:
         self.save_path = gui.Button("Save...")
         path.add_child(_row(em, self.load_path, self.save_path))
         self.root.add_child(path)
+        self.path_section = path
 
         # Keyframe editor: keyframes from the view, their FOV and timing, loop, full-quality preview, files.
         keys = gui.CollapsableVert("Keyframes", 0.3 * em, gui.Margins(int(0.5 * em), 0, 0, 0))

@@ -478,10 +478,17 @@ class ScriptRunner:
         self.main(lambda: self.window.paths.load_keyframes(path))
         self.op_wait_worker()
 
-    def op_open_section(self, name: str = "keys") -> None:
-        """Open a collapsed panel section (for screenshots): "keys"."""
+    def op_open_section(self, name: str = "keys", only: bool = False) -> None:
+        """Open a collapsed panel section (for screenshots): "photo", "view", "export", "path" or "keys";
+        ``only`` collapses the others (so the section is in sight without scrolling)."""
+        p = self.window.panel
+        sections = {"photo": p.photo_section, "view": p.view_section, "export": p.export_section,
+                    "path": p.path_section, "keys": p.keys_section}
+
         def open_it() -> None:
-            self.window.panel.keys_section.set_is_open(True)
+            for key, section in sections.items():
+                if key == name or only:
+                    section.set_is_open(key == name)
             self.window.window.set_needs_layout()
 
         self.main(open_it)

@@ -501,7 +501,7 @@ class ViewerWindow:
 
         def render() -> ViewFrame:
             return session.render_view(cam, size, display, preview=preview, stylized=stylized, should_stop=stop,
-                                       split=split)
+                                       split=split, calibrate=scale >= 1.0)
 
         def interrupted() -> None:
             self._post(lambda: self.scheduler.full_interrupted(version))

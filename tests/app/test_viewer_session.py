@@ -198,6 +198,8 @@ def test_previews_are_colour_matched_to_the_full_frame(untrained):
     full_hw, prev_hw = frame_size(s.info.size, 160), frame_size(s.info.size, 48)
     before = s.render_view(cam, prev_hw, full_hw, preview=True, stylized=True).image.astype(np.float32)
     assert s.colour_gain is None
+    half = s.render_view(cam, frame_size(s.info.size, 80), full_hw, preview=False, stylized=True, calibrate=False)
+    assert s.colour_gain is None and half.image.shape == (*full_hw, 3)  # a progressive level leaves the gain
     full = s.render_view(cam, full_hw, full_hw, preview=False, stylized=True).image.astype(np.float32)
     assert s.colour_gain is not None and s.colour_gain.shape == (3,)
     after = s.render_view(cam, prev_hw, full_hw, preview=True, stylized=True).image.astype(np.float32)
