@@ -295,7 +295,7 @@ class ScriptRunner:
         shot = ImageGrab.grab(xdisplay=os.environ.get("DISPLAY"))
         box = (max(0, r.x), max(0, r.y), min(shot.width, r.x + r.width), min(shot.height, r.y + r.height))
         shot.crop(box).save(path)
-        return {"path": path, "box": list(box)}
+        return {"path": path, "box": list(box), "em": self.window.em}
 
     def op_save_camera_path(self, path: str) -> None:
         self.main(lambda: self.window.paths.save_camera_path(path))

@@ -589,21 +589,58 @@ def test_typed_paths_in_open_dialogs_and_recent_files_kept_between_runs(display,
     on_disk = json.loads((settings_dir / "viewer.json").read_text())
     assert on_disk["recent_photos"] == saved["recent_photos"] and on_disk["last_folder"] == str(tmp_path / "photos2")
 
-    # A second run starts with them: File > Recent photos opens one; a recent file that is gone is forgotten.
+    # A second run starts with them: File > Recent photos > 2 (real clicks) opens cat.jpg; a recent file
+    # that is gone is forgotten.
     (tmp_path / "photos2" / "dog.jpg").unlink()
     second = tmp_path / "second"
     second.mkdir()
     steps = [
         {"op": "settings"},
-        {"op": "recent", "kind": "photo", "index": 0},  # dog.jpg: deleted meanwhile
-        {"op": "expect_error", "contains": "no such file any more"},
-        {"op": "recent", "kind": "photo", "index": 0},  # now cat.jpg
+        {"op": "grab_window", "path": str(second / "window.png")},
+        {"op": "sleep", "seconds": 6.0},  # the test opens File > Recent photos > 2 now
         {"op": "wait_idle", "timeout": 120},
         {"op": "state"},
+        {"op": "recent", "kind": "photo", "index": 1},  # dog.jpg (second since cat.jpg opened): deleted
+        {"op": "expect_error", "contains": "no such file any more"},
         {"op": "quit"},
     ]
-    code, report = run_viewer(display, second, steps, ["--no-model"])
+    libs = _xtest()
+
+    def choose_from_menu(report_path: Path) -> None:
+        rep = wait_for_step(report_path, "grab_window")
+        if libs is None:  # no real events: choose the entry as its menu item does
+            return
+        lx, lt = libs
+        shot = step(rep, "grab_window")["result"]
+        x0, y0 = shot["box"][:2]
+        em = shot["em"]
+        dpy = lx.XOpenDisplay(display.encode())
+
+        def click(x: float, y: float, press: bool = True) -> None:
+            lt.XTestFakeMotionEvent(dpy, -1, int(x0 + x), int(y0 + y), 0)
+            lx.XFlush(dpy)
+            time.sleep(0.4)
+            if press:
+                lt.XTestFakeButtonEvent(dpy, 1, 1, 0)
+                lx.XFlush(dpy)
+                time.sleep(0.2)
+                lt.XTestFakeButtonEvent(dpy, 1, 0, 0)
+                lx.XFlush(dpy)
+                time.sleep(0.8)
+
+        try:  # ImGui's menus: items 1.5 em apart below a 1.5 em bar (File's 5th item: Recent photos)
+            click(1.4 * em, 0.75 * em)
+            click(4 * em, (2.5 + 1.5 * 4) * em, press=False)
+            click(6 * em, (2.5 + 1.5 * 4) * em, press=False)
+            click(19 * em, (2.5 + 1.5 * 5) * em)  # the submenu's second entry
+        finally:
+            lx.XCloseDisplay(dpy)
+
+    if libs is None:
+        steps.insert(3, {"op": "recent", "kind": "photo", "index": 1})
+    code, report = run_viewer(display, second, steps, ["--no-model"], during=choose_from_menu)
     check_ran(code, report)
     assert step(report, "settings")["result"]["recent_photos"] == saved["recent_photos"]
+    assert step(report, "state")["result"]["spec"]["photo"] == str(tmp_path / "photos" / "cat.jpg"), \
+        "File > Recent photos > 2 did not open cat.jpg"
     assert step(report, "recent")["result"]["recent_photos"] == [str(tmp_path / "photos" / "cat.jpg")]
-    assert step(report, "state")["result"]["spec"]["photo"] == str(tmp_path / "photos" / "cat.jpg")
