@@ -8,7 +8,7 @@ photo size, along an orbit drag of ``--frames`` camera positions:
 * **preview** at each ``--preview-sizes`` long side (``render(preview=True)``,
   a point subset), reported as ms per frame and frames per second;
 * **adaptive preview**: the size the viewer's adaptation settles on for a
-  100 ms budget, and the fps there;
+  35 ms budget (``PreviewSettings.target_preview_s``), and the fps there;
 * **full frame** at the viewer's full size (``--full-size``, 768 for the
   default 1280x800 window): latency from request to display-ready image.
 
@@ -21,9 +21,13 @@ photo size, along an orbit drag of ``--frames`` camera positions:
   frames per second delivered while dragging (what the window would show, less
   its own redraw), the latency from mouse-down to the first new frame (also for
   a second drag started 0.3 s after the first, while the first rest's full frame
-  renders), the time from rest to the full frame, and the colour jump between
-  the last preview and the full frame (mean absolute per-channel difference of
-  the means, in 8-bit levels, and mean absolute pixel difference).
+  renders), the time from rest to the first full-quality frame (the half-size
+  level of a progressive full frame) and to the full-size one, and the colour
+  jump between the last preview and the full frame (mean absolute per-channel
+  difference of the means, in 8-bit levels, and mean absolute pixel
+  difference). The current settings and the previous ones (``BASELINE``) run
+  interleaved, ``--repeats`` drag pairs each, so their ratio is measured under
+  the same machine load.
 
 Both paths are measured: the plain 3D photo, and the stylized one through a
 model checkpoint (``--model``; default: the trained one if present, else an
@@ -31,7 +35,8 @@ untrained lite model written to a temporary file, which costs the same time).
 The machine is shared, so the load average is printed with the figures.
 
 Run: ``python benchmarks/bench_viewer.py [--threads 1] [--frames 40]`` or
-``python benchmarks/bench_viewer.py --interactive [--megapixels 1.0]``.
+``python benchmarks/bench_viewer.py --interactive [--megapixels 1.0] [--repeats 2]`` (it measures the
+checkout it is in).
 """
 
 from __future__ import annotations
@@ -39,6 +44,7 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -46,9 +52,11 @@ from typing import List
 
 import torch
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's app and library
+
 from app.viewer.orbit import OrbitPose, pose_camera
 from app.viewer.session import DEFAULT_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE, ViewerSession
-from app.viewer.state import PreviewSettings, adapt_preview_long_side
+from app.viewer.state import PreviewSettings, choose_preview_long_side
 from stylize3d_core.pipeline import PhotoSpec
 from stylize3d_core.render.plain import frame_size
 
@@ -83,14 +91,15 @@ def report(label: str, times: List[float]) -> None:
 def adaptive(session: ViewerSession, cams, display, stylized: bool) -> None:
     settings = PreviewSettings()
     side = settings.preview_long_side
-    times = []
+    times, samples = [], []
     for cam in cams:
         size = frame_size(session.info.size, side)
         t0 = time.perf_counter()
         session.render_view(cam, size, display, preview=True, stylized=stylized)
         dt = time.perf_counter() - t0
         times.append(dt)
-        side = adapt_preview_long_side(side, dt, settings)
+        samples.append((max(size), dt))
+        side = choose_preview_long_side(samples, side, settings)
     tail = times[len(times) // 2:]
     report(f"adaptive preview (settles at {side} px)", tail)
 
@@ -116,104 +125,142 @@ def _drag_session(model: str, megapixels: float, tmp: str, max_size: int = 0):
     return s, info
 
 
-def interactive(model: str, megapixels: float, full_side: int, tmp: str, max_size: int = 0) -> None:
-    """Simulated drags through the viewer's worker and render state machine (see the module docstring)."""
+BASELINE = PreviewSettings(preview_long_side=256, min_preview_long_side=96, max_preview_long_side=320)
+"""The live view's previous settings (first preview 256 px, 96-320 px, every full frame in one level),
+measured interleaved with the current ones for a ratio that the machine's load cancels out of."""
+
+
+def interactive(model: str, megapixels: float, full_side: int, tmp: str, max_size: int = 0,
+                repeats: int = 2) -> None:
+    """Simulated drags through the viewer's worker and render state machine (see the module docstring),
+    with the current preview settings and progressive full frames, and with :data:`BASELINE`, interleaved."""
     import queue
     import threading
+    from collections import deque
 
     import numpy as np
 
-    from app.viewer.render_state import RenderStateMachine
+    from app.viewer.render_state import RenderStateMachine, refine_levels
     from app.viewer.session import display_image
+    from app.viewer.state import PREVIEW_SAMPLES
     from app.viewer.worker import ComputeWorker
 
     s, info = _drag_session(model, megapixels, tmp, max_size)
     h, w = info.size
-    settings = PreviewSettings()
     display = frame_size(info.size, full_side)
     print(f"interactive: photo {w}x{h} ({w * h / 1e6:.2f} MP), {info.n_points:,} points, full frame "
-          f"{display[1]}x{display[0]}, preview budget {1000 * settings.target_preview_s:.0f} ms; "
+          f"{display[1]}x{display[0]}, preview budget {1000 * PreviewSettings().target_preview_s:.0f} ms; "
           f"load average {os.getloadavg()[0]:.1f}")
     cam0 = pose_camera(OrbitPose(), info.scene, info.fov_y_deg)
-    s.render_view(cam0, frame_size(info.size, settings.preview_long_side), display, preview=True, stylized=True)
+    s.render_view(cam0, frame_size(info.size, 128), display, preview=True, stylized=True)
     worker = ComputeWorker()
     worker.start()
-    machine = RenderStateMachine(settings.rest_delay_s)
     shown: "queue.Queue" = queue.Queue()
-    state = {"side": settings.preview_long_side, "yaw": 0.0}
 
-    def request(preview: bool) -> None:
-        pose = OrbitPose(yaw_deg=state["yaw"], pitch_deg=0.0)
-        cam = pose_camera(pose, info.scene, info.fov_y_deg)
-        size = frame_size(info.size, min(state["side"], max(display))) if preview else display
-        cancel = None if preview else threading.Event()
-        version = machine.version
+    def run_policy(name: str, settings: PreviewSettings, progressive: bool) -> dict:
+        machine = RenderStateMachine(settings.rest_delay_s, levels=refine_levels(None) if progressive else (1.0,))
+        state = {"side": settings.preview_long_side, "yaw": 0.0, "times": deque(maxlen=PREVIEW_SAMPLES)}
 
-        def fn():
-            return s.render_view(cam, size, display, preview=preview, stylized=True,
-                                 should_stop=None if cancel is None else cancel.is_set)
+        def request(preview: bool) -> None:
+            cam = pose_camera(OrbitPose(yaw_deg=state["yaw"], pitch_deg=0.0), info.scene, info.fov_y_deg)
+            scale = 1.0 if preview else machine.full_scale
+            if preview:
+                size = frame_size(info.size, min(state["side"], max(display)))
+            else:
+                size = display if scale >= 1.0 else frame_size(info.size, int(round(scale * max(display))))
+            cancel = None if preview else threading.Event()
+            version = machine.version
 
-        worker.request_render(fn, lambda r: shown.put((time.perf_counter(), version, r)), preview=preview,
-                              cancel=cancel)
-        if not preview:
-            machine.full_requested()
+            def fn():
+                return s.render_view(cam, size, display, preview=preview, stylized=True,
+                                     should_stop=None if cancel is None else cancel.is_set, calibrate=scale >= 1.0)
 
-    def pump(until: float, moving: bool, log: list) -> None:
-        """The main loop: a mouse move every 1/60 s while ``moving``, deliveries, the tick."""
-        step_at = time.perf_counter()
-        while time.perf_counter() < until:
-            now = time.perf_counter()
-            if moving and now >= step_at:
-                state["yaw"] += 0.15
-                if machine.changed(now).interrupt:
-                    worker.interrupt_render()
-                request(True)
-                step_at += 1 / 60
-            if machine.full_due(now, holding=moving):
-                request(False)
-            try:
-                t, version, r = shown.get(timeout=0.002)
-            except queue.Empty:
-                continue
-            machine.shown(version, r.preview)
-            if r.preview:
-                state["side"] = adapt_preview_long_side(state["side"], r.seconds, settings)
-            log.append((t, r.preview, r.value, version))
+            worker.request_render(fn, lambda r: shown.put((time.perf_counter(), version, scale, r)),
+                                  preview=preview, cancel=cancel)
+            if not preview:
+                machine.full_requested()
 
-    def drag(seconds: float, label: str, rest: float) -> None:
-        log: list = []
-        t0 = time.perf_counter()
-        pump(t0 + seconds, True, log)
-        t_rest = time.perf_counter()
-        pump(t_rest + rest, False, log)
-        moving = [e for e in log if e[0] <= t_rest and e[1]]
-        first = min((e[0] for e in log), default=float("nan"))
-        fulls = [e for e in log if not e[1] and e[0] > t_rest]
-        fps = len(moving) / seconds
-        print(f"  {label}: {fps:5.1f} fps delivered while dragging ({len(moving)} previews, last at "
-              f"{state['side']} px); mouse-down to first frame {1000 * (first - t0):6.0f} ms; "
-              f"rest to full frame {fulls[0][0] - t_rest if fulls else float('nan'):5.2f} s")
-        previews = [e for e in log if e[1] and e[0] <= t_rest]
-        if previews and fulls:
-            last, full = previews[-1][2].image.astype(np.float32), fulls[0][2].image.astype(np.float32)
-            # the same pose: re-render the last preview's pose as a preview for a like-for-like comparison
-            cam = pose_camera(OrbitPose(yaw_deg=state["yaw"]), info.scene, info.fov_y_deg)
-            same = s.render_view(cam, frame_size(info.size, state["side"]), display, preview=True,
-                                 stylized=True).image.astype(np.float32)  # as the viewer shows it (colour-matched)
-            raw = display_image(s.render(cam, *frame_size(info.size, state["side"]), preview=True, stylized=True),
-                                display).astype(np.float32)
-            raw_jump = np.abs(raw.mean((0, 1)) - full.mean((0, 1))).mean()
-            jump = np.abs(same.mean((0, 1)) - full.mean((0, 1)))
-            print(f"    colour jump last preview -> full frame (same pose, {state['side']} px): mean colour "
-                  f"{jump.mean():.2f} levels (R {jump[0]:.2f} G {jump[1]:.2f} B {jump[2]:.2f}), "
-                  f"mean pixel difference {np.abs(same - full).mean():.1f} levels; without colour matching "
-                  f"{raw_jump:.2f} levels; "
-                  f"(last preview shown vs full, poses 1 step apart: {np.abs(last - full).mean():.1f})")
+        def pump(until: float, moving: bool, log: list) -> None:
+            """The main loop: a mouse move every 1/60 s while ``moving``, deliveries, the tick."""
+            step_at = time.perf_counter()
+            while time.perf_counter() < until:
+                now = time.perf_counter()
+                if moving and now >= step_at:
+                    state["yaw"] = (state["yaw"] + 0.15) % 8.0
+                    if machine.changed(now).interrupt:
+                        worker.interrupt_render()
+                    request(True)
+                    step_at += 1 / 60
+                if machine.full_due(now, holding=moving):
+                    request(False)
+                try:
+                    t, version, scale, r = shown.get(timeout=0.002)
+                except queue.Empty:
+                    continue
+                if machine.shown(version, r.preview, scale):
+                    request(False)
+                if r.preview:
+                    state["times"].append((max(r.value.rendered_size), r.seconds))
+                    state["side"] = choose_preview_long_side(state["times"], state["side"], settings)
+                elif scale >= 1.0 and progressive:
+                    machine.levels = refine_levels(r.seconds, settings.full_budget_s)
+                log.append((t, r.preview, r.value, version, scale))
+                if not moving and machine.settled:
+                    break
 
+        def drag(seconds: float, rest: float) -> dict:
+            log: list = []
+            t0 = time.perf_counter()
+            pump(t0 + seconds, True, log)
+            t_rest = time.perf_counter()
+            pump(t_rest + rest, False, log)
+            moving = [e for e in log if e[0] <= t_rest and e[1]]
+            first = min((e[0] for e in log), default=float("nan"))
+            after = [e for e in log if not e[1] and e[0] > t_rest]
+            fulls = [e for e in after if e[4] >= 1.0]
+            out = {"fps": len(moving) / seconds, "side": state["side"], "first_ms": 1000 * (first - t0),
+                   "sharp_s": after[0][0] - t_rest if after else float("nan"),
+                   "full_s": fulls[0][0] - t_rest if fulls else float("nan"), "jump": float("nan")}
+            if moving and fulls:
+                full = fulls[0][2].image.astype(np.float32)
+                # the same pose: re-render the last preview's pose as a preview for a like-for-like comparison
+                cam = pose_camera(OrbitPose(yaw_deg=state["yaw"]), info.scene, info.fov_y_deg)
+                ps = frame_size(info.size, state["side"])
+                same = s.render_view(cam, ps, display, preview=True, stylized=True).image.astype(np.float32)
+                raw = display_image(s.render(cam, *ps, preview=True, stylized=True), display).astype(np.float32)
+                out["jump"] = float(np.abs(same.mean((0, 1)) - full.mean((0, 1))).mean())
+                out["raw_jump"] = float(np.abs(raw.mean((0, 1)) - full.mean((0, 1))).mean())
+                out["pixel_diff"] = float(np.abs(same - full).mean())
+            return out
+
+        first = drag(1.5, 0.3)  # a second drag 0.3 s after the first: its full frame is rendering
+        second = drag(1.5, 12.0)
+        return {"first": first, "second": second}
+
+    policies = [("baseline (256 px first, 96-320 px, one level)", BASELINE, False),
+                ("current (128 px first, 64-384 px, progressive)", PreviewSettings(), True)]
+    results: dict = {name: [] for name, _, _ in policies}
     try:
-        drag(1.5, "first drag 1.5 s", 0.3)  # a second drag 0.3 s after the first: its full frame is rendering
-        drag(1.5, "second drag (0.3 s after)", 10.0)
-        print(f"  full renders interrupted: {worker.interrupted}")
+        for _ in range(repeats):
+            for name, settings, progressive in policies:  # interleaved: both see the same load
+                results[name].append(run_policy(name, settings, progressive))
+        for name, _, _ in policies:
+            runs = results[name]
+
+            def med(key: str, which: str = "second") -> float:
+                vals = [r[which][key] for r in runs if np.isfinite(r[which].get(key, float("nan")))]
+                return float(np.median(vals)) if vals else float("nan")
+
+            print(f"  {name} ({len(runs)} runs, medians):")
+            print(f"    drag fps {med('fps', 'first'):5.1f} (first drag), {med('fps'):5.1f} (second, 0.3 s after); "
+                  f"preview ends at {med('side'):.0f} px")
+            print(f"    mouse-down to first frame: {med('first_ms', 'first'):5.0f} ms (first drag), "
+                  f"{med('first_ms'):5.0f} ms (second drag, while the first rest's full frame renders)")
+            print(f"    rest to first full-quality frame {med('sharp_s'):5.2f} s, to the full-size frame "
+                  f"{med('full_s'):5.2f} s")
+            print(f"    colour jump last preview -> full frame (same pose): {med('jump'):.2f} levels mean colour "
+                  f"(without colour matching {med('raw_jump'):.2f}), mean pixel difference {med('pixel_diff'):.1f}")
+        print(f"  full renders interrupted: {worker.interrupted}; load average {os.getloadavg()[0]:.1f}")
     finally:
         worker.stop(timeout=10)
 
@@ -229,6 +276,7 @@ def main() -> None:
     parser.add_argument("--interactive", action="store_true", help="simulated drags through the live view's "
                         "worker and state machine (fps, latencies, colour jump)")
     parser.add_argument("--megapixels", type=float, default=1.0, help="photo size of --interactive (default 1 MP)")
+    parser.add_argument("--repeats", type=int, default=2, help="drag pairs per settings in --interactive (default 2)")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     if args.interactive:
@@ -236,7 +284,7 @@ def main() -> None:
         with tempfile.TemporaryDirectory() as tmp:
             print(f"model {Path(model).name}; torch threads {args.threads}; {os.cpu_count()} CPUs")
             for max_size in (args.max_size, 0):  # as the viewer opens it (default --max-size), and whole
-                interactive(model, args.megapixels, args.full_size, tmp, max_size)
+                interactive(model, args.megapixels, args.full_size, tmp, max_size, args.repeats)
         print(f"load average after: {os.getloadavg()[0]:.1f}")
         return
 

@@ -58,6 +58,7 @@ def built(tmp_path_factory) -> Dict[str, object]:
          else shutil.copy2(REPO / name, src / name))
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME", "PYTHONSTARTUP")}
     env["PIP_DISABLE_PIP_VERSION_CHECK"] = "1"
+    env["STYLIZE3D_CONFIG_DIR"] = str(base / "config")  # the viewer's recent files stay out of the user's home
     seconds: Dict[str, float] = {}
 
     t0 = time.perf_counter()

@@ -5,10 +5,12 @@
                      [--max-size 640] [--fov DEG] [--strength 0.8] [--threads 1] [--size 1280x800] [--invert-wheel]
                      [--test-script steps.json --test-report report.json]
 
-Modules: :mod:`.orbit` (camera math), :mod:`.state` (view state, scheduling),
-:mod:`.worker` (the compute thread), :mod:`.session` (3D photo, model, renders,
-export), :mod:`.panel`, :mod:`.window` and :mod:`.actions` (widgets, the window
-and its controllers, main thread), :mod:`.script` (test hooks). Only the last
+Modules: :mod:`.orbit` (camera math), :mod:`.state` (view state, preview sizes,
+typed paths), :mod:`.render_state` (when the view needs which frame),
+:mod:`.settings` (recent files, kept between runs), :mod:`.worker` (the compute
+thread), :mod:`.session` (3D photo, model, renders, export), :mod:`.panel`,
+:mod:`.window` and :mod:`.actions` (widgets, the window and its controllers, main
+thread), :mod:`.script` (test hooks). Only the last
 four import Open3D's GUI, and only when the viewer starts, so the rest can be
 imported and tested headless.
 

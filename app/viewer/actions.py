@@ -45,9 +45,9 @@ from . import panel as P
 from .orbit import HOME
 from .session import NO_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE, ExportJob, StylizeInfo
 from .state import (
-    LOADED_PATH, ExportSettings, PhotoInfo, Playback, export_destination, export_progress_text, fov_range,
-    path_source, playback_frame, push_recent,
-    screenshot_size, shows_stylized, trajectory_cameras, view_camera,
+    LOADED_PATH, ExportSettings, PhotoInfo, Playback, TrajectoryLimits, clamp_trajectory, export_destination,
+    export_progress_text, fov_range, path_source, playback_frame, screenshot_size, shows_stylized,
+    trajectory_cameras, trajectory_limits, view_camera,
 )
 
 if TYPE_CHECKING:
@@ -123,13 +123,28 @@ class PhotoController(Controller):
 
     def __init__(self, window: "ViewerWindow") -> None:
         super().__init__(window)
-        self.recent_photos: tuple = ()
         self._strip: list = []
 
     def build_strip(self) -> None:
-        """Thumbnails of the bundled styles (main thread, at start)."""
-        for path in BUNDLED_STYLES:
+        """Thumbnails of the bundled styles and the recently used ones (main thread, at start); the recent
+        photos in the panel's picker."""
+        for path in BUNDLED_STYLES + tuple(p for p in self.window.settings.recent_styles if os.path.isfile(p)):
             self._add_to_strip(path)
+        self.show_recent()
+
+    @property
+    def recent_photos(self) -> tuple:
+        """The recent photos, most recent first (kept in the settings file)."""
+        return self.window.settings.recent_photos
+
+    def show_recent(self) -> None:
+        """List the recent photos in the panel's picker."""
+        combo = self.window.panel.recent_photos
+        combo.clear_items()
+        combo.add_item(P.RECENT_PHOTOS)
+        for path in self.recent_photos:
+            combo.add_item(os.path.basename(path))
+        combo.selected_index = 0
 
     def _add_to_strip(self, path: str) -> None:
         if path in self._strip or len(self._strip) >= MAX_STRIP:
@@ -157,13 +172,7 @@ class PhotoController(Controller):
 
     def _loaded(self, info: PhotoInfo, spec: "PhotoSpec") -> None:
         w = self.window
-        self.recent_photos = push_recent(self.recent_photos, str(spec.photo))
-        combo = w.panel.recent_photos
-        combo.clear_items()
-        combo.add_item(P.RECENT_PHOTOS)
-        for path in self.recent_photos:
-            combo.add_item(os.path.basename(path))
-        combo.selected_index = 0
+        w.remember(w.settings.with_photo(str(spec.photo)))
         w.state = replace(w.state, spec=spec, photo_info=info, stylize_available=False, pose=HOME, view_fov=None)
         p = w.panel
         h, wd = info.size
@@ -172,8 +181,10 @@ class PhotoController(Controller):
         p.fov.set_limits(lo, hi)
         p.fov.double_value = info.fov_y_deg
         p.fov_label.text = f"Field of view: {info.fov_y_deg:.1f} degrees"
+        self.window.paths.set_limits(trajectory_limits(info.camera_range, info.scene))
         p.set_enabled(True)
-        w.set_busy(f"3D photo ready in {info.seconds:.1f} s (depth: {info.depth_source})", 0.5)
+        narrow = "" if info.range_scale >= 0.995 else f"; camera range {100 * info.range_scale:.0f} %"
+        w.set_busy(f"3D photo ready in {info.seconds:.1f} s (depth: {info.depth_source}{narrow})", 0.5)
         w.photo_changed()  # requests the first (plain) frame
         p.model_label.text = "encoding the point cloud for the model ..."
         w.worker.submit("encode photo", w.session.prepare_stylized,
@@ -206,6 +217,8 @@ class PhotoController(Controller):
         w = self.window
         w.state = replace(w.state, style=path)
         self._add_to_strip(str(path))
+        if os.path.abspath(str(path)) not in BUNDLED_STYLES:  # (the strip always shows the bundled ones)
+            w.remember(w.settings.with_style(str(path)))
         w.panel.style_label.text = os.path.basename(path)
         if w.state.stylize_available:
             w.set_busy("Style applied", None)
@@ -217,8 +230,8 @@ class PhotoController(Controller):
 
     @ui_callback
     def on_recent_photo(self, _text: str, index: int) -> None:
-        if 1 <= index <= len(self.recent_photos):
-            self.open_photo(self.recent_photos[index - 1])
+        if index >= 1:
+            self.window.open_recent(self.recent_photos, index - 1, self.open_photo)
 
     def open_second_style(self, path: Optional[str]) -> None:
         """Read a second style image on the worker to mix with the first (None removes it)."""
@@ -274,11 +287,13 @@ class PhotoController(Controller):
     # -- widget callbacks --------------------------------------------------------------
     @ui_callback
     def on_open_photo(self) -> None:
-        self.window.file_dialog(gui.FileDialog.OPEN, "Open photo", IMAGE_FILTERS, self.open_photo)
+        self.window.file_dialog(gui.FileDialog.OPEN, "Open photo", IMAGE_FILTERS, self.open_photo,
+                                recent=self.recent_photos)
 
     @ui_callback
     def on_open_style(self) -> None:
-        self.window.file_dialog(gui.FileDialog.OPEN, "Open style image", IMAGE_FILTERS, self.open_style)
+        self.window.file_dialog(gui.FileDialog.OPEN, "Open style image", IMAGE_FILTERS, self.open_style,
+                                recent=self.window.settings.recent_styles)
 
     @ui_callback
     def on_sample(self) -> None:
@@ -325,6 +340,20 @@ class CameraPathController(Controller):
         t = replace(w.state.trajectory, x=float(p.amp_x.double_value), y=float(p.amp_y.double_value),
                     z=(0.0, float(p.forward.double_value)))
         w.state = replace(w.state, trajectory=t)
+
+    def set_limits(self, limits: TrajectoryLimits) -> None:
+        """Bound the trajectory's parameter fields by what the open photo shows cleanly
+        (:func:`~app.viewer.state.trajectory_limits`) and clamp the trajectory into them."""
+        w = self.window
+        p = w.panel
+        t = clamp_trajectory(w.state.trajectory, limits)
+        w.state = replace(w.state, trajectory=t)
+        p.amp_x.set_limits(0.0, limits.max_xy)
+        p.amp_y.set_limits(0.0, limits.max_xy)
+        p.forward.set_limits(limits.min_forward, limits.max_forward)
+        for field, value in ((p.amp_x, t.x), (p.amp_y, t.y), (p.forward, t.z[1] if isinstance(t.z, tuple) else t.z)):
+            if isinstance(value, (int, float)):
+                field.double_value = float(value)
 
     # -- preview in the view ------------------------------------------------------------
     @property

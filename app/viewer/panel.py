@@ -7,6 +7,7 @@ theme's font size), so the layout follows the UI scale.
 
 from __future__ import annotations
 
+import os
 from typing import Callable, List, Optional, Sequence, Tuple, get_args
 
 import open3d.visualization.gui as gui
@@ -64,13 +65,39 @@ MENU_LOAD_PATH, MENU_SAVE_PATH, MENU_EXPORT, MENU_SCREENSHOT, MENU_QUIT = 5, 6, 
 MENU_STYLIZED, MENU_RESET, MENU_PREVIEW, MENU_HELP, MENU_ABOUT = 10, 11, 12, 13, 14
 
 
-def build_menubar() -> gui.Menu:
-    """The application's menu bar (File, View, Help)."""
+MENU_RECENT_PHOTO = 100
+"""Menu ids of the recent photos: ``MENU_RECENT_PHOTO + i`` for the i-th most recent."""
+MENU_RECENT_STYLE = 200
+"""Menu ids of the recent styles: ``MENU_RECENT_STYLE + i``."""
+
+
+def recent_label(path: str, index: int) -> str:
+    """A recent file's menu entry: its number and name, then its folder (shortened from the left)."""
+    folder, name = os.path.split(path)
+    if len(folder) > 40:
+        folder = "..." + folder[-37:]
+    return f"{index + 1}  {name}   ({folder})"
+
+
+def build_menubar(recent_photos: Sequence[str] = (), recent_styles: Sequence[str] = (),
+                  stylized: bool = True) -> gui.Menu:
+    """The application's menu bar (File with its recent photos and styles, View, Help). Open3D menus
+    cannot change once built, so the window builds a new bar when the recent files change."""
     file_menu = gui.Menu()
     file_menu.add_item("Open photo...   O", MENU_OPEN)
     file_menu.add_item("Open style...   S", MENU_STYLE)
     file_menu.add_item("Open depth file...   D", MENU_DEPTH)
     file_menu.add_item("Open bundled sample   M", MENU_SAMPLE)
+    for title, paths, base in (("Recent photos", recent_photos, MENU_RECENT_PHOTO),
+                               ("Recent styles", recent_styles, MENU_RECENT_STYLE)):
+        sub = gui.Menu()
+        if paths:
+            for i, path in enumerate(paths):
+                sub.add_item(recent_label(path, i), base + i)
+        else:
+            sub.add_item("(none yet)", base + 99)
+            sub.set_enabled(base + 99, False)
+        file_menu.add_menu(title, sub)
     file_menu.add_separator()
     file_menu.add_item("Load camera path...", MENU_LOAD_PATH)
     file_menu.add_item("Save camera path...", MENU_SAVE_PATH)
@@ -81,7 +108,7 @@ def build_menubar() -> gui.Menu:
     file_menu.add_item("Quit   Ctrl+Q", MENU_QUIT)
     view_menu = gui.Menu()
     view_menu.add_item("Stylized   T", MENU_STYLIZED)
-    view_menu.set_checked(MENU_STYLIZED, True)
+    view_menu.set_checked(MENU_STYLIZED, stylized)
     view_menu.add_item("Reset view   R", MENU_RESET)
     view_menu.add_item("Preview camera path   C", MENU_PREVIEW)
     help_menu = gui.Menu()
@@ -158,7 +185,7 @@ class Panel:
         photo.add_child(self.photo_label)
         self.recent_photos = gui.Combobox()
         self.recent_photos.add_item(RECENT_PHOTOS)
-        self.recent_photos.tooltip = "photos opened in this session"
+        self.recent_photos.tooltip = "photos opened recently (also in File > Recent photos)"
         photo.add_child(self.recent_photos)
         self.depth = gui.Combobox()
         for _, label in DEPTH_CHOICES:
@@ -190,6 +217,7 @@ class Panel:
         self.mix.tooltip = "0: the first style, 1: the second"
         photo.add_child(self.mix)
         self.root.add_child(photo)
+        self.photo_section = photo
 
         # Look: stylized / original, strength, FOV, reset.
         look = gui.CollapsableVert("View", 0.3 * em, gui.Margins(int(0.5 * em), 0, 0, 0))
@@ -219,6 +247,7 @@ class Panel:
         for slider in (self.strength, self.fov, self.mix, self.split):  # the theme draws no track of its own
             slider.background_color = SLIDER_TRACK
         self.root.add_child(look)
+        self.view_section = look
 
         # Export.
         export = gui.CollapsableVert("Export", 0.3 * em, gui.Margins(int(0.5 * em), 0, 0, 0))
@@ -241,6 +270,7 @@ class Panel:
         self.export = gui.Button("Export... (E)")
         self.screenshot = gui.Button("Screenshot (P)")
         self.root.add_child(export)  # (its buttons are in the status area, always in sight)
+        self.export_section = export
 
         # Camera path: trajectory and its parameters, preview, load / save.
         path = gui.CollapsableVert("Camera path", 0.3 * em, gui.Margins(int(0.5 * em), 0, 0, 0))
@@ -267,6 +297,7 @@ class Panel:
         self.save_path = gui.Button("Save...")
         path.add_child(_row(em, self.load_path, self.save_path))
         self.root.add_child(path)
+        self.path_section = path
 
         # Keyframe editor: keyframes from the view, their FOV and timing, loop, full-quality preview, files.
         keys = gui.CollapsableVert("Keyframes", 0.3 * em, gui.Margins(int(0.5 * em), 0, 0, 0))

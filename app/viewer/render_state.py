@@ -25,6 +25,16 @@ once it rests, and any new camera change abandons a full frame in progress.
   preview does not wait for it.
 * **SETTLED** ("full"): the full frame of the current version is on screen.
 
+**Progressive full frames.** Where a full frame takes long (the U-Net decoder's
+cost grows with the pixel count: ~1.5-2.5 s at 768x512 on a shared 2-core CPU),
+RESTING renders it in *levels* (:attr:`RenderStateMachine.levels`, fractions of
+the full size, e.g. ``(0.5, 1.0)``): the half-size frame through the same
+decoder and every point -- sharp, with the final frame's colours -- in about a
+quarter of the time, then the full one. :meth:`RenderStateMachine.shown` says
+when the next level is due; only the last level settles the view, and a change
+at any level interrupts it. :func:`refine_levels` chooses the levels from the
+last full frame's time.
+
 ``version`` counts changes; a frame rendered for an older version is out of
 date and never settles the view. Runs on the GUI main thread only (no locks).
 """
@@ -33,9 +43,10 @@ from __future__ import annotations
 
 import enum
 import math
-from typing import NamedTuple
+from typing import NamedTuple, Optional, Sequence, Tuple
 
 from stylize3d_core.checks import check_range
+from stylize3d_core.errors import InputError
 
 
 class RenderPhase(enum.Enum):
@@ -58,16 +69,40 @@ class Change(NamedTuple):
     interrupt: bool
 
 
-class RenderStateMachine:
-    """Which frame the live view needs and when (see the module docstring)."""
+PROGRESSIVE_LEVELS: Tuple[float, ...] = (0.5, 1.0)
+"""The levels of a progressive full frame: half size first, then the full size."""
 
-    def __init__(self, rest_delay_s: float = 0.15, hold_delay_s: float = 0.5) -> None:
+
+def refine_levels(last_full_s: Optional[float], budget_s: float = 0.5) -> Tuple[float, ...]:
+    """The levels of the next full frame: :data:`PROGRESSIVE_LEVELS` when a full frame takes longer than
+    ``budget_s`` (or its time is not known yet), else the full size at once (``(1.0,)``).
+
+    A half-size level costs about a quarter of the full frame (the decoder is per pixel), so it is worth
+    it only where the full frame itself misses the budget of a sharp frame after the rest."""
+    if last_full_s is None or not math.isfinite(last_full_s) or last_full_s > budget_s:
+        return PROGRESSIVE_LEVELS
+    return (1.0,)
+
+
+class RenderStateMachine:
+    """Which frame the live view needs and when (see the module docstring).
+
+    Attributes:
+        levels: the size fractions of the levels of a full frame, increasing, ending at 1.0 (default
+            ``(1.0,)``: one level); a new value takes effect at the next change.
+    """
+
+    def __init__(self, rest_delay_s: float = 0.15, hold_delay_s: float = 0.5,
+                 levels: Sequence[float] = (1.0,)) -> None:
         self.rest_delay_s = check_range(rest_delay_s, "rest_delay_s", 0.0, 10.0)
         self.hold_delay_s = check_range(hold_delay_s, "hold_delay_s", self.rest_delay_s, 10.0)
         self.version = 0
         self.phase = RenderPhase.SETTLED
         self._changed_at = -math.inf
         self._full_version = -1  # version whose full frame was requested (RESTING) or shown / given up
+        self.levels = check_levels(levels)
+        self._levels = self.levels  # the levels of the current version's full frame
+        self._level = 0  # index in _levels of the level requested (RESTING) or due next
 
     def changed(self, now: float) -> Change:
         """The view changed at ``now``: MOVING; ``interrupt`` when a full render was in progress."""
@@ -75,26 +110,47 @@ class RenderStateMachine:
         self.version += 1
         self._changed_at = now
         self.phase = RenderPhase.MOVING
+        self._levels = self.levels = check_levels(self.levels)
+        self._level = 0
         return Change(self.version, interrupt)
 
     def full_due(self, now: float, holding: bool = False) -> bool:
         """True once MOVING has rested ``rest_delay_s`` (``hold_delay_s`` while ``holding``: the mouse
         button is still down, a drag may go on; a busy GUI thread delivers its moves in bursts, and a
         full frame requested between two bursts would only be interrupted by the next one). The caller
-        requests the full frame, then calls :meth:`full_requested`."""
+        requests the full frame at :attr:`full_scale`, then calls :meth:`full_requested`."""
         delay = self.hold_delay_s if holding else self.rest_delay_s
         return self.phase is RenderPhase.MOVING and now - self._changed_at >= delay
 
+    @property
+    def full_scale(self) -> float:
+        """The size fraction of the full-frame level to request next (or being rendered)."""
+        return self._levels[self._level]
+
+    @property
+    def full_level(self) -> Tuple[int, int]:
+        """(index, count) of that level."""
+        return self._level, len(self._levels)
+
     def full_requested(self) -> None:
-        """The full frame of the current version was requested: RESTING."""
+        """The full frame (its level :attr:`full_scale`) of the current version was requested: RESTING."""
         if self.phase is RenderPhase.MOVING:
             self.phase = RenderPhase.RESTING
             self._full_version = self.version
 
-    def shown(self, version: int, preview: bool) -> None:
-        """A frame of ``version`` is on screen; the current version's full frame settles the view."""
-        if not preview and version == self.version and self.phase is RenderPhase.RESTING:
-            self.phase = RenderPhase.SETTLED
+    def shown(self, version: int, preview: bool, scale: float = 1.0) -> bool:
+        """A frame of ``version`` (a full frame: of level ``scale``) is on screen. The current version's
+        last level settles the view; an earlier level makes the next one due: returns True, and the
+        caller requests it at :attr:`full_scale` (the phase stays RESTING)."""
+        if preview or version != self.version or self.phase is not RenderPhase.RESTING:
+            return False
+        if scale < self.full_scale - 1e-9:  # an earlier level than the one requested (not expected)
+            return False
+        if self._level + 1 < len(self._levels):
+            self._level += 1
+            return True
+        self.phase = RenderPhase.SETTLED
+        return False
 
     def full_failed(self, version: int) -> None:
         """The full frame of ``version`` could not be rendered: settle (ask again after the next change)."""
@@ -103,7 +159,8 @@ class RenderStateMachine:
 
     def full_interrupted(self, version: int) -> None:
         """The full render of ``version`` was abandoned without a change (e.g. a test hook or an export
-        needing the worker): if it is still the current view, rest again and re-request it."""
+        needing the worker): if it is still the current view, rest again and re-request it (the same
+        level: the ones before it are on screen)."""
         if version == self.version and self.phase is RenderPhase.RESTING:
             self.phase = RenderPhase.MOVING
 
@@ -116,3 +173,12 @@ class RenderStateMachine:
     def rendering_full(self) -> bool:
         """True while the full frame of the current version is requested but not shown."""
         return self.phase is RenderPhase.RESTING
+
+
+def check_levels(levels: Sequence[float]) -> Tuple[float, ...]:
+    """``levels`` as a tuple, checked: increasing fractions in (0, 1], the last one 1.0."""
+    out = tuple(float(v) for v in levels)
+    if not out or out[-1] != 1.0 or any(not 0.0 < v <= 1.0 for v in out) or any(
+            b <= a for a, b in zip(out, out[1:])):
+        raise InputError("full-frame levels", f"need increasing fractions in (0, 1] ending at 1.0, got {levels!r}")
+    return out

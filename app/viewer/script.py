@@ -161,10 +161,24 @@ class ScriptRunner:
         t_end = time.monotonic() + float(timeout)
         while time.monotonic() < t_end:
             if self.window.is_settled() and self.main(self.window.is_settled):
+                out = {"shown": self.main(self._shown_info), **self.main(self._rest_timings)}
                 time.sleep(0.3)  # let Open3D draw the new image before anyone looks at the screen
-                return {"shown": self.main(self._shown_info)}
+                return out
             time.sleep(0.05)
         raise TimeoutError(f"the view did not settle within {timeout:g} s")
+
+    def _rest_timings(self) -> Dict[str, Any]:
+        """Seconds from the end of the last ``orbit`` step to the first full-quality frame shown after it
+        (the half-size level of a progressive full frame, or the full one) and to the full-size frame."""
+        end = getattr(self, "_orbit_end", None)
+        if end is None:
+            return {}
+        st = self.window.stats
+        half = [t - end for t in st["level_shown"] if t >= end]
+        full = [t - end for t in st["full_shown"] if t >= end]
+        out = {"rest_to_full_s": round(full[0], 3) if full else None}
+        out["rest_to_sharp_s"] = round(min(half[:1] + full[:1]), 3) if half or full else None
+        return out
 
     def _shown_info(self) -> Dict[str, Any]:
         f = self.window._shown
@@ -185,6 +199,7 @@ class ScriptRunner:
             time.sleep(max(0.0, t0 + (i + 1) * float(interval) - time.monotonic()))
         self.main(lambda: None)  # every move has been applied
         seconds = time.monotonic() - t0
+        self._orbit_end = time.monotonic()
         shown = self.main(lambda: [t for t in w.stats["preview_shown"] if t0 <= t <= t0 + seconds])
         return {"pose": asdict(self.main(lambda: w.state.pose)), "drag_seconds": round(seconds, 3),
                 "preview_frames": len(shown), "preview_fps": round(len(shown) / max(seconds, 1e-6), 2),
@@ -281,7 +296,7 @@ class ScriptRunner:
         shot = ImageGrab.grab(xdisplay=os.environ.get("DISPLAY"))
         box = (max(0, r.x), max(0, r.y), min(shot.width, r.x + r.width), min(shot.height, r.y + r.height))
         shot.crop(box).save(path)
-        return {"path": path, "box": list(box)}
+        return {"path": path, "box": list(box), "em": self.window.em}
 
     def op_save_camera_path(self, path: str) -> None:
         self.main(lambda: self.window.paths.save_camera_path(path))
@@ -333,8 +348,8 @@ class ScriptRunner:
         self.main(opener)
 
         def type_and_save() -> bool:
-            w.save_as_edit.text_value = text
-            w._save_as_ok()
+            w.path_edit.text_value = text
+            w._path_ok()
             return w.dialog_open
 
         still_open = self.main(type_and_save)
@@ -394,6 +409,73 @@ class ScriptRunner:
             self.op_wait_worker()
         return {"dialog_open": self.main(lambda: w.dialog_open), "status": self.main(lambda: w.panel.status.text)}
 
+    def op_open_dialog(self, what: str = "photo", text: Optional[str] = None, close: bool = False) -> None:
+        """Open an Open dialog ("photo", "style") as its shortcut does and leave it open (for a screenshot),
+        with ``text`` typed in its path field; ``close`` closes the dialog that is open instead."""
+        w = self.window
+        if close:
+            self.main(w.close_dialog)
+            return
+        self.main({"photo": w.photos.on_open_photo, "style": w.photos.on_open_style}[what])
+        if text is not None:
+            self.main(lambda: setattr(w.path_edit, "text_value", text))
+        time.sleep(0.5)
+        self.main(w.window.post_redraw)
+        time.sleep(0.3)
+
+    def op_open_as(self, what: str, text: str) -> Dict[str, Any]:
+        """Open an Open dialog ("photo", "style", "camera_path") as its shortcut does, type ``text`` in its
+        path field and press Open; reports whether a dialog is still open (the error's) and the errors."""
+        w = self.window
+        opener = {"photo": w.photos.on_open_photo, "style": w.photos.on_open_style,
+                  "camera_path": w.paths.on_load_path}[what]
+        self.main(opener)
+
+        def type_and_open() -> Dict[str, Any]:
+            w.path_edit.text_value = text
+            w._path_ok()
+            return {"dialog_open": w.dialog_open, "errors": list(w.errors)}
+
+        out = self.main(type_and_open)
+        self.op_wait_worker()
+        return out
+
+    def op_recent(self, kind: str = "photo", index: int = 0) -> Dict[str, Any]:
+        """Choose entry ``index`` of File > Recent photos / styles (as the menu item does)."""
+        w = self.window
+        base = P.MENU_RECENT_PHOTO if kind == "photo" else P.MENU_RECENT_STYLE
+
+        def choose() -> None:
+            paths = w.settings.recent_photos if kind == "photo" else w.settings.recent_styles
+            w.open_recent(paths, int(index), w.photos.open_photo if kind == "photo" else w.photos.open_style)
+
+        self.main(choose)
+        self.op_wait_worker()
+        return {"menu_id": base + int(index), **self.op_settings()}
+
+    def op_timings(self) -> Dict[str, Any]:
+        """Medians (ms) of the window's render timings so far: preview render, hand-over to the main thread
+        (``post_delay``), request to display (``preview_latency``), the half-size and full-size full frames;
+        and how many full renders were interrupted."""
+        def med(values) -> Optional[float]:
+            return None if not values else round(1000.0 * sorted(values)[len(values) // 2], 1)
+
+        def timings() -> Dict[str, Any]:
+            st = self.window.stats
+            return {name: med(st[name]) for name in ("preview_seconds", "post_delay", "preview_latency",
+                                                      "level_seconds", "full_seconds")} | {
+                "previews": len(st["preview_seconds"]), "interrupted": self.window.worker.interrupted}
+
+        return self.main(timings)
+
+    def op_settings(self) -> Dict[str, Any]:
+        """The remembered settings (recent photos and styles, last folder) and the settings file's path."""
+        from .settings import settings_path
+
+        st = self.main(lambda: self.window.settings)
+        return {"recent_photos": list(st.recent_photos), "recent_styles": list(st.recent_styles),
+                "last_folder": st.last_folder, "settings_file": str(settings_path())}
+
     def op_style_strip(self, index: int = 0) -> Dict[str, Any]:
         """Click thumbnail ``index`` of the style strip (applies that style)."""
         w = self.window
@@ -450,10 +532,17 @@ class ScriptRunner:
         self.main(lambda: self.window.paths.load_keyframes(path))
         self.op_wait_worker()
 
-    def op_open_section(self, name: str = "keys") -> None:
-        """Open a collapsed panel section (for screenshots): "keys"."""
+    def op_open_section(self, name: str = "keys", only: bool = False) -> None:
+        """Open a collapsed panel section (for screenshots): "photo", "view", "export", "path" or "keys";
+        ``only`` collapses the others (so the section is in sight without scrolling)."""
+        p = self.window.panel
+        sections = {"photo": p.photo_section, "view": p.view_section, "export": p.export_section,
+                    "path": p.path_section, "keys": p.keys_section}
+
         def open_it() -> None:
-            self.window.panel.keys_section.set_is_open(True)
+            for key, section in sections.items():
+                if key == name or only:
+                    section.set_is_open(key == name)
             self.window.window.set_needs_layout()
 
         self.main(open_it)

@@ -180,7 +180,8 @@ class ViewerSession:
         self.photo, self._plain, self._stylized, self.layers = photo, plain, None, layers
         self.colour_gain = None
         self.info = PhotoInfo(name, tuple(photo.size), plain.num_points, float(photo.fov_y_deg),
-                              photo.depth.source, scene, time.perf_counter() - t0)
+                              photo.depth.source, scene, time.perf_counter() - t0, photo.camera_range,
+                              float(ldi.range_scale))
         return self.info
 
     def prepare_stylized(self) -> StylizeInfo:
@@ -265,18 +266,20 @@ class ViewerSession:
 
     def render_view(self, camera: Cameras, size: Tuple[int, int], display_hw: Tuple[int, int], *,
                     preview: bool, stylized: bool, should_stop: Optional[Callable[[], bool]] = None,
-                    split: Optional[float] = None) -> ViewFrame:
+                    split: Optional[float] = None, calibrate: bool = True) -> ViewFrame:
         """Render at ``size`` (H, W) and convert for display at ``display_hw`` (``should_stop``: see :meth:`render`).
 
         ``split`` in [0, 1] (stylized views only): a before / after comparison, the original 3D photo
-        left of that fraction of the width and the stylized view right of it (see :func:`split_view`)."""
+        left of that fraction of the width and the stylized view right of it (see :func:`split_view`).
+        A stylized full frame re-matches the previews' colours to itself (:meth:`calibrate_previews`)
+        unless ``calibrate`` is False (an intermediate level of a progressive frame: the final one will)."""
         rgb = self.render(camera, size[0], size[1], preview=preview, stylized=stylized, should_stop=should_stop)
         if stylized and self.can_stylize:
             if preview:
                 self._preview_hw = (int(size[0]), int(size[1]))
                 if self.colour_gain is not None:
                     rgb = np.clip(rgb * self.colour_gain, 0.0, 1.0)
-            else:
+            elif calibrate:
                 self.calibrate_previews(camera, rgb)
         if split is not None and stylized and self.can_stylize:
             before = self.render(camera, size[0], size[1], preview=preview, stylized=False)

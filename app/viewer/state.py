@@ -11,8 +11,8 @@ one rule for whether the view goes through the model.
 
 When a frame is needed (a preview at once after every change, the full frame
 once the view rests) is :mod:`app.viewer.render_state`'s state machine.
-:func:`adapt_preview_long_side` keeps previews within their
-time budget (~24 fps) by shrinking or growing the preview size.
+:func:`choose_preview_long_side` keeps previews within their time budget
+(~24 fps) by choosing the preview size from the measured render times.
 """
 
 from __future__ import annotations
@@ -21,14 +21,19 @@ import math
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Literal, NamedTuple, Optional, Tuple, get_args
+from typing import Dict, List, Literal, NamedTuple, Optional, Sequence, Tuple, get_args
+
+import numpy as np
 
 from stylize3d_core.checks import check_choice, check_range
 from stylize3d_core.errors import InputError
 from stylize3d_core.geometry.camera import Cameras, check_fov
+from stylize3d_core.geometry.camera_range import CameraRange
 from stylize3d_core.geometry.keyframes import KeyframePath, interpolate_keyframes
 from stylize3d_core.io.camera_path import CameraPath
-from stylize3d_core.geometry.trajectories import TrajectoryName, TrajectorySettings, make_trajectory
+from stylize3d_core.geometry.trajectories import (
+    DEFAULT_XY, DEFAULT_Z, TrajectoryName, TrajectorySettings, make_trajectory,
+)
 from stylize3d_core.io.video import MAX_GIF_FPS
 from stylize3d_core.pipeline import PhotoSpec
 from stylize3d_core.render.plain import frame_size
@@ -76,22 +81,27 @@ class PreviewSettings:
     """Frame sizes and timing of the live view.
 
     Attributes:
-        preview_long_side: long side of the first preview while dragging, pixels. Default 256.
-        min_preview_long_side: smallest preview the adaptation may choose. Default 96.
-        max_preview_long_side: largest preview the adaptation may choose. Default 320.
+        preview_long_side: long side of the first preview, pixels (later ones follow the measured
+            render time, :func:`choose_preview_long_side`). Default 128.
+        min_preview_long_side: smallest preview the adaptation may choose. Default 64 (on a loaded
+            2-core machine a 96 px stylized preview alone takes ~35 ms).
+        max_preview_long_side: largest preview the adaptation may choose. Default 384.
         full_long_side: cap on the full-resolution frame's long side (it fits the view). Default 768.
         target_preview_s: time budget of rendering one preview frame. Default 0.035: with the
             hand-over to the GUI thread, a frame every ~1/24 s while dragging (>= 24 fps where the
-            display keeps up); the size follows the measured render time (:func:`adapt_preview_long_side`).
+            display keeps up).
         rest_delay_s: the camera must rest this long before the full frame is rendered. Default 0.15.
+        full_budget_s: a full frame slower than this is rendered progressively, half size first
+            (:func:`~app.viewer.render_state.refine_levels`). Default 0.5.
     """
 
-    preview_long_side: int = 256
-    min_preview_long_side: int = 96
-    max_preview_long_side: int = 320
+    preview_long_side: int = 128
+    min_preview_long_side: int = 64
+    max_preview_long_side: int = 384
     full_long_side: int = 768
     target_preview_s: float = 0.035
     rest_delay_s: float = 0.15
+    full_budget_s: float = 0.5
 
     def __post_init__(self) -> None:
         lo, hi = self.min_preview_long_side, self.max_preview_long_side
@@ -100,6 +110,7 @@ class PreviewSettings:
         check_range(self.full_long_side, "full_long_side", 16, 4096)
         check_range(self.target_preview_s, "target_preview_s", 0.005, 10.0)
         check_range(self.rest_delay_s, "rest_delay_s", 0.0, 10.0)
+        check_range(self.full_budget_s, "full_budget_s", 0.0, 60.0)
 
 
 class PhotoInfo(NamedTuple):
@@ -112,6 +123,12 @@ class PhotoInfo(NamedTuple):
     depth_source: str
     scene: OrbitScene
     seconds: float
+    camera_range: CameraRange = CameraRange()
+    """The part of the viewer's camera range this photo shows cleanly (``Photo3D.camera_range``): the
+    orbit limits (:meth:`~app.viewer.orbit.OrbitLimits.from_range`) and the trajectory limits
+    (:func:`trajectory_limits`) come from it."""
+    range_scale: float = 1.0
+    """That part as a fraction of the full range (``LDI.range_scale``; 1: all of it)."""
 
 
 @dataclass(frozen=True)
@@ -275,24 +292,64 @@ def screenshot_size(photo_hw: Tuple[int, int], view_hw: Tuple[int, int], long_si
     return full_frame_size(photo_hw, view_hw, 8192)
 
 
-def adapt_preview_long_side(current: int, seconds: float, settings: PreviewSettings = PreviewSettings()) -> int:
-    """The next preview's long side after one took ``seconds`` at ``current``.
+PREVIEW_SAMPLES = 12
+"""How many recent previews :func:`choose_preview_long_side` fits its cost model to."""
 
-    Render time grows about with the pixel count, so the side scales by
-    ``sqrt(target / seconds)``, damped (at most x1.25 up, /1.5 down per frame),
-    and kept when within 20 % of the target; rounded to a multiple of 16 inside
-    ``[min_preview_long_side, max_preview_long_side]``.
+
+def preview_cost_model(samples: Sequence[Tuple[int, float]]) -> Optional[Tuple[float, float]]:
+    """``(a, b)`` of ``seconds ~ a + b * side**2`` fitted to recent previews ``(long side, seconds)``.
+
+    A preview's time is a fixed part (display conversion, the decoder's and rasterizer's per-call overhead)
+    plus a part that grows with the pixel count (rasterization and the U-Net decoder, per pixel). The
+    median time of each size seen is used (robust to a spike of machine load); with two sizes or more
+    the line is fitted by least squares, with one the fixed part is taken as zero (all time per pixel:
+    the cautious reading, it never overestimates how large a preview may be). None without a usable
+    sample.
     """
-    if not math.isfinite(seconds) or seconds <= 0:
-        return int(current)
-    ratio = settings.target_preview_s / seconds
-    if 0.8 <= ratio <= 1.25:
-        return int(current)
-    factor = min(1.25, max(1 / 1.5, math.sqrt(ratio)))
-    nxt = int(round(current * factor / 16)) * 16
-    if nxt == current:  # the rounding must not freeze the adaptation
-        nxt = current + (16 if factor > 1 else -16)
-    return int(min(settings.max_preview_long_side, max(settings.min_preview_long_side, nxt)))
+    by_side: Dict[int, List[float]] = {}
+    for side, seconds in samples:
+        if side > 0 and math.isfinite(seconds) and seconds > 0:
+            by_side.setdefault(int(side), []).append(float(seconds))
+    if not by_side:
+        return None
+    x = np.array([float(side) ** 2 for side in by_side], np.float64)
+    y = np.array([float(np.median(v)) for v in by_side.values()], np.float64)
+    if len(x) >= 2 and np.ptp(x) > 0.1 * x.max():
+        b, a = np.polyfit(x, y, 1)
+        if b > 0 and a >= 0:
+            return float(a), float(b)
+    i = int(np.argmax(x))  # one size (or an unusable fit): all per pixel, from the largest size seen
+    return 0.0, float(y[i] / x[i])
+
+
+def choose_preview_long_side(samples: Sequence[Tuple[int, float]], current: int,
+                             settings: PreviewSettings = PreviewSettings()) -> int:
+    """The next preview's long side, from the measured times ``samples`` (``(long side, seconds)`` of the
+    last previews, oldest first; :data:`PREVIEW_SAMPLES` of them are used) so that a preview fits
+    ``settings.target_preview_s`` (~24 fps while dragging).
+
+    The side that fits the budget under :func:`preview_cost_model` is approached in damped steps (at
+    most x1.25 up, /1.5 down per frame: a burst of load does not collapse the size at once), kept when
+    the predicted time at ``current`` is within 15 % under to 10 % over the budget (no flicker between
+    sizes), rounded to a multiple of 8 inside ``[min_preview_long_side, max_preview_long_side]``. When
+    the fixed part alone exceeds the budget the smallest size is chosen.
+    """
+    lo, hi = settings.min_preview_long_side, settings.max_preview_long_side
+    cur = int(min(hi, max(lo, current)))
+    model = preview_cost_model(list(samples)[-PREVIEW_SAMPLES:])
+    if model is None:
+        return cur
+    a, b = model
+    budget = settings.target_preview_s
+    predicted = a + b * cur * cur
+    if 0.85 * budget <= predicted <= 1.1 * budget:
+        return cur
+    ideal = math.sqrt((budget - a) / b) if budget > a else 0.0
+    step = min(1.25 * cur, max(cur / 1.5, ideal))
+    nxt = int(round(step / 8.0)) * 8
+    if nxt == cur and ideal != cur:  # the rounding must not freeze the adaptation
+        nxt = cur + (8 if ideal > cur else -8)
+    return int(min(hi, max(lo, nxt)))
 
 
 def wheel_ticks(wheel_dy: float, invert: bool = False) -> float:
@@ -334,6 +391,17 @@ def resolve_typed_path(text: str, folder: Optional[str]) -> str:
     return os.path.normpath(os.path.join(base, t)) + ("/" if t.endswith("/") else "")
 
 
+def resolve_open_path(text: str, folder: Optional[str]) -> str:
+    """The existing file a typed path names (as :func:`resolve_typed_path`); InputError naming the path
+    when nothing is there or it is a folder."""
+    path = resolve_typed_path(text, folder).rstrip("/") or "/"
+    if os.path.isdir(path):
+        raise InputError(path, "is a folder: type a file's name, or use Browse...")
+    if not os.path.exists(path):
+        raise InputError(path, "no such file")
+    return path
+
+
 def push_recent(recent: Tuple[str, ...], path: str, limit: int = 8) -> Tuple[str, ...]:
     """``recent`` with ``path`` first (moved there if present), at most ``limit`` entries."""
     p = str(path)
@@ -347,6 +415,40 @@ def export_destination(path: str, fmt: ExportFormat) -> str:
     if fmt == "png":
         return str(p.with_suffix("")) + "/" if p.suffix else (path if path.endswith("/") else path + "/")
     return str(p.with_suffix(EXPORT_SUFFIX[fmt])) if p.suffix.lower() != EXPORT_SUFFIX[fmt] else path
+
+
+class TrajectoryLimits(NamedTuple):
+    """Bounds of the trajectory's parameters for one photo (scene units): the sideways and vertical
+    amplitude ``[0, max_xy]`` and the forward end ``[min_forward, max_forward]``."""
+
+    max_xy: float
+    min_forward: float
+    max_forward: float
+
+
+def trajectory_limits(rng: CameraRange, scene: OrbitScene) -> TrajectoryLimits:
+    """What the trajectory's parameters may reach on a photo whose clean range is ``rng``: the range's
+    pan for the amplitudes, its dolly (kept the near margin in front of the near surface) for the forward
+    end; never less than the default trajectory (the layered depth image always covers that one)."""
+    centre, near = scene.centre_depth, scene.near_depth
+    max_forward = min(rng.max_dolly * centre, (1.0 - rng.near_margin) * near)
+    return TrajectoryLimits(max(DEFAULT_XY, rng.max_pan), min(0.0, rng.min_dolly * centre),
+                            max(DEFAULT_Z[1], max_forward))
+
+
+def clamp_trajectory(t: TrajectorySettings, limits: TrajectoryLimits) -> TrajectorySettings:
+    """``t`` with its amplitudes and forward end inside ``limits`` (ranges given as (start, end) are
+    clamped end by end; a single number ``a`` means ``(-a, a)``, as in the trajectories)."""
+    hi = limits.max_xy
+
+    def amp(v):  # an amplitude in [0, hi], or a (start, end) range in [-hi, hi]
+        if isinstance(v, (int, float)):
+            return float(min(hi, max(0.0, v)))
+        return tuple(float(min(hi, max(-hi, x))) for x in v)
+
+    z = tuple(t.z) if isinstance(t.z, (tuple, list)) else (-float(t.z), float(t.z))  # a number a: (-a, a)
+    z = tuple(float(min(limits.max_forward, max(limits.min_forward, v))) for v in z)
+    return replace(t, x=amp(t.x), y=amp(t.y), z=z)
 
 
 def clamp_state_pose(state: ViewState, scene: OrbitScene, limits: OrbitLimits = OrbitLimits()) -> ViewState:

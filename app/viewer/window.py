@@ -27,9 +27,11 @@ thread posts to a destroyed window and nothing closes from a tick callback
 from __future__ import annotations
 
 import os
+import sys
 import threading
 import time
 import traceback
+from collections import deque
 from dataclasses import dataclass, replace
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
@@ -46,11 +48,12 @@ from .actions import CameraPathController, ExportController, PhotoController, ui
 from .applications import ApplicationsController
 from .orbit import HOME, OrbitLimits, apply_drag, apply_wheel, orbit
 from .session import NO_MODEL, ViewerSession, ViewFrame
-from .render_state import RenderStateMachine
+from .render_state import RenderStateMachine, refine_levels
 from .state import (
-    VIEWER_MAX_SIZE, PreviewSettings, ViewState, adapt_preview_long_side, full_frame_size,
-    resolve_typed_path, shows_stylized, view_camera, view_fov, wheel_ticks,
+    PREVIEW_SAMPLES, VIEWER_MAX_SIZE, PreviewSettings, ViewState, choose_preview_long_side, clamp_state_pose,
+    full_frame_size, resolve_open_path, resolve_typed_path, shows_stylized, view_camera, view_fov, wheel_ticks,
 )
+from .settings import MAX_RECENT, ViewerSettings, load_settings, save_settings
 from .worker import ComputeWorker, RenderResult
 
 DOUBLE_CLICK_S = 0.35
@@ -104,9 +107,9 @@ class ViewerWindow:
         self.options = options
         self.state = ViewState(spec=replace(options.spec, photo=None), model=options.model,
                                strength=options.strength)
-        self.limits = OrbitLimits()
+        self.limits = OrbitLimits()  # replaced by each photo's own (photo_changed)
         self.preview = PreviewSettings()
-        self.scheduler = RenderStateMachine(self.preview.rest_delay_s)
+        self.scheduler = RenderStateMachine(self.preview.rest_delay_s, levels=refine_levels(None))
         self.session = ViewerSession(options.model, use_model=options.use_model)
         self.worker = ComputeWorker(on_error=lambda name, e: self._post(lambda: self.show_error(name, e)))
         self.photos = PhotoController(self)
@@ -116,9 +119,10 @@ class ViewerWindow:
         self.errors: List[str] = []
         self.stats: Dict[str, Any] = {"preview_seconds": [], "full_seconds": [], "full_latency": [], "preview_shown": [],
                                       "preview_latency": [], "post_delay": [], "mouse_down": [],
-                                      "drag_moves": [], "full_shown": []}
+                                      "drag_moves": [], "full_shown": [], "level_seconds": [], "level_shown": []}
         self.script_thread: Optional[threading.Thread] = None
         self._preview_side = self.preview.preview_long_side
+        self._preview_times: deque = deque(maxlen=PREVIEW_SAMPLES)  # (long side, seconds) of the last previews
         self._display_hw: Tuple[int, int] = (0, 0)
         self._shown_generation = 0
         self._shown: Optional[ViewFrame] = None
@@ -131,8 +135,14 @@ class ViewerWindow:
         self._close_pending: Optional[float] = None  # monotonic time of a close request waiting for CLOSE_GRACE_S
         self._dialog_open = False
         self._status_before_error: Optional[str] = None
-        self.last_folder: Optional[str] = None  # where the last file dialog chose a file
+        loaded = load_settings()  # recent files and the last folder, from the last runs
+        self.settings: ViewerSettings = loaded.settings
+        folder = self.settings.last_folder
+        self.last_folder: Optional[str] = folder if folder and os.path.isdir(folder) else None
         self._build()
+        if loaded.warning:
+            print(f"stylize3d-viewer: {loaded.warning}", file=sys.stderr)
+            self.set_status(loaded.warning)
         self.worker.start()
         if options.style:
             self.photos.open_style(options.style)
@@ -141,8 +151,7 @@ class ViewerWindow:
 
     # -- construction -------------------------------------------------------------
     def _build(self) -> None:
-        if self.app.menubar is None:
-            self.app.menubar = P.build_menubar()
+        self.app.menubar = P.build_menubar(self.settings.recent_photos, self.settings.recent_styles)
         w = self.window = self.app.create_window("stylize3d viewer", self.options.width, self.options.height)
         self.em = em = w.theme.font_size
         self.image = gui.ImageWidget(o3d.geometry.Image(np.full((8, 12, 3), 32, np.uint8)))
@@ -206,6 +215,9 @@ class ViewerWindow:
             P.MENU_PREVIEW: cp.toggle_preview, P.MENU_HELP: self._on_help, P.MENU_ABOUT: self._on_about,
         }
         menu.update(self.applications.menu_callbacks())
+        for i in range(MAX_RECENT):  # (the entries that exist; the bar is rebuilt as the lists change)
+            menu[P.MENU_RECENT_PHOTO + i] = lambda i=i: self.open_recent(self.settings.recent_photos, i, ph.open_photo)
+            menu[P.MENU_RECENT_STYLE + i] = lambda i=i: self.open_recent(self.settings.recent_styles, i, ph.open_style)
         for item, cb in menu.items():
             w.set_on_menu_item_activated(item, cb)
 
@@ -236,7 +248,13 @@ class ViewerWindow:
             self.view_changed()
 
     def photo_changed(self) -> None:
-        """A new photo is open (``state.photo_info``): size the view for it and request its first frame."""
+        """A new photo is open (``state.photo_info``): take its camera limits (what it shows cleanly,
+        ``Photo3D.camera_range``), size the view for it and request its first frame."""
+        info = self.state.photo_info
+        if info is not None:
+            self.limits = OrbitLimits.from_range(info.camera_range, deg_per_pixel=self.limits.deg_per_pixel,
+                                                 dolly_per_tick=self.limits.dolly_per_tick)
+            self.state = clamp_state_pose(self.state, info.scene, self.limits)
         self._display_hw = (0, 0)
         self._update_display_size()
 
@@ -299,16 +317,43 @@ class ViewerWindow:
             raise box["error"]
         return box.get("value")
 
+    # -- recent files (the settings file) ---------------------------------------------
+    def remember(self, settings: ViewerSettings) -> None:
+        """Keep ``settings`` (recent files, last folder): write the settings file and rebuild the menu bar
+        with the recent files. A settings file that cannot be written is said in the status line."""
+        if settings == self.settings:
+            return
+        self.settings = settings
+        try:
+            save_settings(settings)
+        except Exception as e:  # not fatal: the history is only not kept for the next run
+            self.set_status(f"Recent files not saved: {e}")
+        self.app.menubar = P.build_menubar(settings.recent_photos, settings.recent_styles, self.state.stylized)
+        self.window.set_needs_layout()
+        self.photos.show_recent()
+
+    def open_recent(self, paths: Tuple[str, ...], index: int, open_fn: Callable[[str], None]) -> None:
+        """A recent file was chosen (File > Recent ...): open it, or say it is gone and forget it."""
+        if not 0 <= index < len(paths):
+            return
+        path = paths[index]
+        if not os.path.isfile(path):
+            self.remember(self.settings.without(path))
+            self.show_error("open recent", InputError(path, "no such file any more (removed from the recent files)"))
+            return
+        open_fn(path)
+
     # -- errors and status ------------------------------------------------------------
-    def show_error(self, what: str, error: BaseException) -> None:
+    def show_error(self, what: str, error: BaseException, then: Optional[Callable[[], None]] = None) -> None:
         """Show ``error`` in a dialog and keep it for the test report (main thread). The status line says
-        "Error (what)" while the dialog is open and goes back to what it said when it is closed."""
+        "Error (what)" while the dialog is open and goes back to what it said when it is closed; ``then``
+        runs after its OK (the path dialog comes back with what was typed)."""
         message = str(error) if isinstance(error, InputError) else f"{type(error).__name__}: {error}"
         self.errors.append(f"{what}: {message}")
         if self._status_before_error is None:
             self._status_before_error = self.panel.status.text
         self.panel.status.text = f"Error ({what})"
-        self.show_message("stylize3d: " + what, message)
+        self.show_message("stylize3d: " + what, message, [("OK", then)])
 
     def show_message(self, title: str, message: str, buttons=None) -> None:
         """A modal message with buttons ((label, callback); default a single OK that closes it)."""
@@ -350,14 +395,13 @@ class ViewerWindow:
             self.panel.status.text = text
         self.panel.progress.value = 0.0 if fraction is None else float(min(1.0, max(0.0, fraction)))
 
-    def file_dialog(self, mode, title: str, filters, on_done: Callable[[str], None], default_name: str = "") -> None:
-        """Choose a file; ``on_done(path)`` runs with it (its errors become a dialog). Open uses Open3D's
-        file browser in the last used folder; Save asks for a typed path first (absolute, ``~/...``, or
-        relative to the last used folder), with Browse... for the file browser."""
-        if mode == gui.FileDialog.SAVE:
-            self._save_as(title, filters, on_done, default_name)
-        else:
-            self._browse(mode, title, filters, on_done)
+    def file_dialog(self, mode, title: str, filters, on_done: Callable[[str], None], default_name: str = "",
+                    recent: Tuple[str, ...] = ()) -> None:
+        """Choose a file; ``on_done(path)`` runs with it (its errors become a dialog). A small dialog asks
+        for a typed path (absolute, ``~/...``, or relative to the folder shown: the last used one), with
+        Browse... for Open3D's file browser in that folder and, when opening, the ``recent`` files to pick
+        with one click. Opening checks that the file exists (a clear error names it if not)."""
+        self._path_dialog(mode, title, filters, on_done, default_name, recent)
 
     def _run_chosen(self, title: str, on_done: Callable[[str], None], path: str) -> None:
         self.close_dialog()
@@ -377,7 +421,9 @@ class ViewerWindow:
         dlg.set_on_done(lambda path: self._run_chosen(title, on_done, path))
         self.show_dialog(dlg)
 
-    def _save_as(self, title: str, filters, on_done: Callable[[str], None], default_name: str) -> None:
+    def _path_dialog(self, mode, title: str, filters, on_done: Callable[[str], None], default_name: str,
+                     recent: Tuple[str, ...], text: Optional[str] = None) -> None:
+        saving = mode == gui.FileDialog.SAVE
         folder = self.last_folder or os.getcwd()
         em = self.em
         dlg = gui.Dialog(title)
@@ -385,31 +431,42 @@ class ViewerWindow:
         box.add_child(gui.Label(title))
         box.add_child(gui.Label(f"in {folder}"))
         edit = gui.TextEdit()
-        edit.text_value = os.path.join(folder, default_name) if default_name else folder + os.sep
+        if text is None:
+            text = os.path.join(folder, default_name) if default_name else folder + os.sep
+        edit.text_value = text
         edit.tooltip = "an absolute path, ~/..., or a path relative to the folder above"
         box.add_child(edit)
-        self.save_as_edit = edit  # (test hooks type into it)
+        self.path_edit = edit  # (test hooks type into it)
 
-        def save() -> None:
+        def accept() -> None:
             try:
-                path = resolve_typed_path(edit.text_value, folder)
-            except InputError as e:
-                self.show_error(title, e)
+                path = (resolve_typed_path if saving else resolve_open_path)(edit.text_value, folder)
+            except InputError as e:  # say why, then ask again with what was typed
+                typed = edit.text_value
+                self.show_error(title, e, lambda: self._path_dialog(mode, title, filters, on_done, default_name,
+                                                                      recent, typed))
                 return
             self._run_chosen(title, on_done, path)
 
         def browse() -> None:
             self.close_dialog()
-            self._browse(gui.FileDialog.SAVE, title, filters, on_done)
+            self._browse(mode, title, filters, on_done)
 
+        if recent and not saving:
+            box.add_child(gui.Label("Recent:"))
+            for i, path in enumerate(recent[:MAX_RECENT]):  # one click opens it (a missing one is forgotten)
+                b = gui.Button(P.recent_label(path, i))
+                b.horizontal_padding_em = 0.3
+                b.set_on_clicked(lambda i=i: self.open_recent(recent, i, lambda p: self._run_chosen(title, on_done, p)))
+                box.add_child(b)
         row = gui.Horiz(0.5 * em)
-        for label, cb in (("Browse...", browse), ("Cancel", self.close_dialog), ("Save", save)):
+        for label, cb in (("Browse...", browse), ("Cancel", self.close_dialog), ("Save" if saving else "Open", accept)):
             b = gui.Button(label)
             b.set_on_clicked(cb)
             row.add_child(b)
         box.add_child(row)
         dlg.add_child(box)
-        self._save_as_ok = save  # (test hooks press Save)
+        self._path_ok = accept  # (test hooks press Save / Open)
         self.show_dialog(dlg)
 
     # -- view changes and rendering -----------------------------------------------------
@@ -431,30 +488,36 @@ class ViewerWindow:
             return
         cam = camera if camera is not None else view_camera(self.state, info.scene, info.fov_y_deg)
         display = self._display_hw
-        size = frame_size(info.size, min(self._preview_side, max(display))) if preview else display
+        scale = 1.0 if preview or camera is not None else self.scheduler.full_scale
+        if preview:
+            size = frame_size(info.size, min(self._preview_side, max(display)))
+        elif scale < 1.0:  # a progressive level: the full quality at a fraction of the size
+            size = frame_size(info.size, max(32, int(round(scale * max(display)))))
+        else:
+            size = display
         stylized = shows_stylized(self.state)
         split = self.state.split if self.state.compare else None
-        version = self.scheduler.version
+        version = self.scheduler.version if camera is None else -1  # a path preview's frame never settles the view
         session = self.session
         cancel = None if preview or camera is not None else threading.Event()
         stop = None if cancel is None else cancel.is_set
 
         def render() -> ViewFrame:
             return session.render_view(cam, size, display, preview=preview, stylized=stylized, should_stop=stop,
-                                       split=split)
+                                       split=split, calibrate=scale >= 1.0)
 
         def interrupted() -> None:
             self._post(lambda: self.scheduler.full_interrupted(version))
 
         gen = self.worker.request_render(
-            render, lambda res: self._post(lambda: self._on_frame(res, version)), preview=preview,
+            render, lambda res: self._post(lambda: self._on_frame(res, version, scale)), preview=preview,
             on_error=lambda name, e: self._post(lambda: self._on_render_failed(name, e, version, preview)),
             cancel=cancel, on_interrupted=None if cancel is None else interrupted)
         self._requested_at[gen] = time.perf_counter()
         if not preview and camera is None:
             self.scheduler.full_requested()
 
-    def _on_frame(self, res: RenderResult, version: int) -> None:
+    def _on_frame(self, res: RenderResult, version: int, scale: float = 1.0) -> None:
         if res.generation <= self._shown_generation:
             return
         self._shown_generation = res.generation
@@ -462,8 +525,10 @@ class ViewerWindow:
         self.image.update_image(o3d.geometry.Image(frame.image))
         self.window.post_redraw()
         self._shown = frame
-        self.scheduler.shown(version, res.preview)
+        next_level = self.scheduler.shown(version, res.preview, scale)
         self.paths.frame_shown()
+        if next_level:  # a progressive level is on screen: the next (finer) one
+            self.request_render(preview=False)
         now = time.perf_counter()
         latency = now - self._requested_at.pop(res.generation, now)
         for g in [g for g in self._requested_at if g < res.generation]:
@@ -474,11 +539,16 @@ class ViewerWindow:
             st["preview_latency"].append(latency)
             st["preview_seconds"].append(res.seconds)
             st["preview_shown"].append(time.monotonic())
-            self._preview_side = adapt_preview_long_side(self._preview_side, res.seconds, self.preview)
+            self._preview_times.append((max(frame.rendered_size), res.seconds))
+            self._preview_side = choose_preview_long_side(self._preview_times, self._preview_side, self.preview)
+        elif scale < 1.0:
+            st["level_seconds"].append(res.seconds)
+            st["level_shown"].append(time.monotonic())
         else:
             st["full_seconds"].append(res.seconds)
             st["full_shown"].append(time.monotonic())
             st["full_latency"].append(latency)
+            self.scheduler.levels = refine_levels(res.seconds, self.preview.full_budget_s)  # for the next rest
         for value in st.values():
             if isinstance(value, list):
                 del value[:-200]
@@ -490,6 +560,8 @@ class ViewerWindow:
         if st["preview_seconds"]:
             ms = 1000.0 * float(np.median(st["preview_seconds"][-10:]))
             text = f"preview {ms:.0f} ms @ {self._preview_side} px"
+        if st["level_seconds"] and self.scheduler.levels != (1.0,):
+            text += f"; half {st['level_seconds'][-1]:.2f} s"
         if st["full_seconds"]:
             text += f"; full {st['full_seconds'][-1]:.2f} s"
         self.panel.fps_label.text = text

@@ -16,3 +16,11 @@ def untrained(tmp_path_factory) -> Path:
     path = tmp_path_factory.mktemp("model") / "untrained.safetensors"
     save_checkpoint(path, Stylize3DModel(ModelConfig.lite()), 1, {"note": "untrained, for tests"})
     return path
+
+
+@pytest.fixture(autouse=True)
+def settings_dir(tmp_path_factory, monkeypatch) -> Path:
+    """Every test's viewer keeps its settings file (recent files) in a fresh folder, never the user's."""
+    folder = tmp_path_factory.mktemp("config")
+    monkeypatch.setenv("STYLIZE3D_CONFIG_DIR", str(folder))
+    return folder

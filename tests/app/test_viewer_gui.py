@@ -555,3 +555,92 @@ def test_real_wheel_up_moves_forwards(display, tmp_path):
     code, report = run_viewer(display, tmp_path, steps, ["--no-model"], during=interact)
     check_ran(code, report)
     assert step(report, "state")["result"]["pose"]["dolly"] > 0, "wheel up did not move forwards"
+
+
+def test_typed_paths_in_open_dialogs_and_recent_files_kept_between_runs(display, tmp_path, settings_dir):
+    sample = REPO / "assets" / "samples" / "coffee.jpg"
+    for folder, name in (("photos", "cat.jpg"), ("photos2", "dog.jpg")):
+        (tmp_path / folder).mkdir()
+        shutil.copy(sample, tmp_path / folder / name)
+    first = tmp_path / "first"
+    first.mkdir()
+    steps = [
+        {"op": "open_as", "what": "photo", "text": str(tmp_path / "photos" / "cat.jpg")},  # absolute
+        {"op": "wait_idle", "timeout": 120},
+        {"op": "open_as", "what": "photo", "text": "missing.jpg"},  # relative to the last folder: not there
+        {"op": "expect_error", "contains": "no such file"},
+        {"op": "status"},
+        {"op": "open_as", "what": "photo", "text": "../photos2/dog.jpg"},  # relative to the last folder
+        {"op": "wait_idle", "timeout": 120},
+        {"op": "state"},
+        {"op": "settings"},
+        {"op": "quit"},
+    ]
+    code, report = run_viewer(display, first, steps, ["--no-model"])
+    check_ran(code, report)
+    missing = step(report, "open_as", 1)["result"]
+    assert any(str(tmp_path / "photos" / "missing.jpg") + ": no such file" in e for e in missing["errors"])
+    assert not step(report, "status")["result"]["dialog_open"]
+    assert "Error" not in step(report, "status")["result"]["status"]  # the error's status line went with it
+    assert step(report, "state")["result"]["spec"]["photo"] == str(tmp_path / "photos2" / "dog.jpg")
+    saved = step(report, "settings")["result"]
+    assert saved["settings_file"] == str(settings_dir / "viewer.json")
+    assert saved["recent_photos"] == [str(tmp_path / "photos2" / "dog.jpg"), str(tmp_path / "photos" / "cat.jpg")]
+    on_disk = json.loads((settings_dir / "viewer.json").read_text())
+    assert on_disk["recent_photos"] == saved["recent_photos"] and on_disk["last_folder"] == str(tmp_path / "photos2")
+
+    # A second run starts with them: File > Recent photos > 2 (real clicks) opens cat.jpg; a recent file
+    # that is gone is forgotten.
+    (tmp_path / "photos2" / "dog.jpg").unlink()
+    second = tmp_path / "second"
+    second.mkdir()
+    steps = [
+        {"op": "settings"},
+        {"op": "grab_window", "path": str(second / "window.png")},
+        {"op": "sleep", "seconds": 6.0},  # the test opens File > Recent photos > 2 now
+        {"op": "wait_idle", "timeout": 120},
+        {"op": "state"},
+        {"op": "recent", "kind": "photo", "index": 1},  # dog.jpg (second since cat.jpg opened): deleted
+        {"op": "expect_error", "contains": "no such file any more"},
+        {"op": "quit"},
+    ]
+    libs = _xtest()
+
+    def choose_from_menu(report_path: Path) -> None:
+        rep = wait_for_step(report_path, "grab_window")
+        if libs is None:  # no real events: choose the entry as its menu item does
+            return
+        lx, lt = libs
+        shot = step(rep, "grab_window")["result"]
+        x0, y0 = shot["box"][:2]
+        em = shot["em"]
+        dpy = lx.XOpenDisplay(display.encode())
+
+        def click(x: float, y: float, press: bool = True) -> None:
+            lt.XTestFakeMotionEvent(dpy, -1, int(x0 + x), int(y0 + y), 0)
+            lx.XFlush(dpy)
+            time.sleep(0.4)
+            if press:
+                lt.XTestFakeButtonEvent(dpy, 1, 1, 0)
+                lx.XFlush(dpy)
+                time.sleep(0.2)
+                lt.XTestFakeButtonEvent(dpy, 1, 0, 0)
+                lx.XFlush(dpy)
+                time.sleep(0.8)
+
+        try:  # ImGui's menus: items 1.5 em apart below a 1.5 em bar (File's 5th item: Recent photos)
+            click(1.4 * em, 0.75 * em)
+            click(4 * em, (2.5 + 1.5 * 4) * em, press=False)
+            click(6 * em, (2.5 + 1.5 * 4) * em, press=False)
+            click(19 * em, (2.5 + 1.5 * 5) * em)  # the submenu's second entry
+        finally:
+            lx.XCloseDisplay(dpy)
+
+    if libs is None:
+        steps.insert(3, {"op": "recent", "kind": "photo", "index": 1})
+    code, report = run_viewer(display, second, steps, ["--no-model"], during=choose_from_menu)
+    check_ran(code, report)
+    assert step(report, "settings")["result"]["recent_photos"] == saved["recent_photos"]
+    assert step(report, "state")["result"]["spec"]["photo"] == str(tmp_path / "photos" / "cat.jpg"), \
+        "File > Recent photos > 2 did not open cat.jpg"
+    assert step(report, "recent")["result"]["recent_photos"] == [str(tmp_path / "photos" / "cat.jpg")]

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
-from app.viewer.render_state import RenderPhase, RenderStateMachine
+import pytest
+
+from app.viewer.render_state import PROGRESSIVE_LEVELS, RenderPhase, RenderStateMachine, refine_levels
+from stylize3d_core.errors import InputError
 
 
 def test_preview_while_moving_then_full_after_rest():
@@ -58,3 +61,39 @@ def test_while_the_button_is_held_the_rest_takes_longer():
     s.changed(0.0)
     assert s.full_due(0.2) and not s.full_due(0.2, holding=True)  # a pause between two bursts of moves
     assert s.full_due(0.5, holding=True)
+
+
+def test_progressive_levels_half_then_full_and_a_change_interrupts_any_level():
+    s = RenderStateMachine(rest_delay_s=0.0, levels=(0.5, 1.0))
+    s.changed(0.0)
+    assert s.full_due(0.0) and s.full_scale == 0.5 and s.full_level == (0, 2)
+    s.full_requested()
+    assert not s.shown(s.version, preview=True)  # a late preview: nothing due
+    assert s.shown(s.version, preview=False, scale=0.5)  # the half-size level: the full one is due next
+    assert s.phase is RenderPhase.RESTING and not s.settled and s.full_scale == 1.0 and s.full_level == (1, 2)
+    s.full_requested()  # (already resting: stays)
+    assert s.rendering_full
+    c = s.changed(1.0)  # a drag during the full level
+    assert c.interrupt and s.full_scale == 0.5  # the next rest starts from the half level again
+    s.full_requested()
+    assert s.shown(s.version, preview=False, scale=0.5)
+    s.full_interrupted(s.version)  # abandoned without a change: the same (full) level is asked again
+    assert s.phase is RenderPhase.MOVING and s.full_scale == 1.0
+    s.full_requested()
+    assert not s.shown(s.version, preview=False, scale=1.0)
+    assert s.settled
+    s.levels = (1.0,)  # a fast machine: one level from the next change on
+    assert s.full_scale == 1.0
+    s.changed(2.0)
+    s.full_requested()
+    assert not s.shown(s.version, preview=False) and s.settled
+
+
+def test_refine_levels_and_bad_levels():
+    assert refine_levels(None) == PROGRESSIVE_LEVELS == (0.5, 1.0)  # not measured yet: progressive
+    assert refine_levels(2.0, 0.5) == (0.5, 1.0)
+    assert refine_levels(0.3, 0.5) == (1.0,)
+    assert refine_levels(float("nan")) == (0.5, 1.0)
+    for bad in ((), (0.5,), (1.0, 0.5, 1.0), (0.0, 1.0), (0.5, 0.5, 1.0)):
+        with pytest.raises(InputError):
+            RenderStateMachine(levels=bad)

@@ -198,9 +198,31 @@ def test_previews_are_colour_matched_to_the_full_frame(untrained):
     full_hw, prev_hw = frame_size(s.info.size, 160), frame_size(s.info.size, 48)
     before = s.render_view(cam, prev_hw, full_hw, preview=True, stylized=True).image.astype(np.float32)
     assert s.colour_gain is None
+    half = s.render_view(cam, frame_size(s.info.size, 80), full_hw, preview=False, stylized=True, calibrate=False)
+    assert s.colour_gain is None and half.image.shape == (*full_hw, 3)  # a progressive level leaves the gain
     full = s.render_view(cam, full_hw, full_hw, preview=False, stylized=True).image.astype(np.float32)
     assert s.colour_gain is not None and s.colour_gain.shape == (3,)
     after = s.render_view(cam, prev_hw, full_hw, preview=True, stylized=True).image.astype(np.float32)
     jump_before = np.abs(before.mean((0, 1)) - full.mean((0, 1))).mean()
     jump_after = np.abs(after.mean((0, 1)) - full.mean((0, 1))).mean()
     assert jump_after <= jump_before + 1e-6 and jump_after < 1.0, (jump_before, jump_after)
+
+
+def test_the_photos_clean_camera_range_bounds_the_orbit(plain):
+    from dataclasses import replace
+
+    from app.viewer.orbit import OrbitLimits, clamp_pose
+    from stylize3d_core.geometry.camera_range import CameraRange
+
+    rng = plain.info.camera_range
+    assert rng == plain.photo.camera_range  # what the LDI reports it covers cleanly
+    assert plain.info.range_scale == pytest.approx(plain.photo.ldi.range_scale)
+    assert rng == CameraRange().scaled(plain.info.range_scale)  # (the default LDI settings' range, scaled)
+    assert isinstance(rng, CameraRange) and 0 <= rng.max_yaw_deg <= CameraRange().max_yaw_deg
+    limits = OrbitLimits.from_range(rng, deg_per_pixel=0.05)
+    wild = clamp_pose(OrbitPose(yaw_deg=80.0, pitch_deg=-80.0, pan_x=5.0, dolly=-9.0), plain.info.scene, limits)
+    assert wild.yaw_deg == pytest.approx(rng.max_yaw_deg) and wild.pitch_deg == pytest.approx(-rng.max_pitch_deg)
+    assert wild.pan_x == pytest.approx(rng.max_pan)
+    assert wild.dolly == pytest.approx(rng.min_dolly * plain.info.scene.centre_depth)
+    narrow = OrbitLimits.from_range(replace(rng, max_yaw_deg=1.0))  # a narrower range: a tighter clamp
+    assert clamp_pose(OrbitPose(yaw_deg=80.0), plain.info.scene, narrow).yaw_deg == pytest.approx(1.0)

@@ -9,11 +9,13 @@ import torch
 
 from app.viewer.orbit import HOME, OrbitPose, OrbitScene, cam_to_world
 from app.viewer.state import (
-    VIEWER_MAX_SIZE, ExportSettings, PhotoInfo, Playback, PreviewSettings, ViewState,
-    adapt_preview_long_side, clamp_state_pose, export_destination, fov_range, full_frame_size, playback_frame,
-    shows_stylized, trajectory_cameras, user_choices, view_camera, view_fov,
+    VIEWER_MAX_SIZE, ExportSettings, PhotoInfo, Playback, PreviewSettings, ViewState, choose_preview_long_side,
+    clamp_state_pose, clamp_trajectory, export_destination, fov_range, full_frame_size, playback_frame,
+    preview_cost_model, resolve_open_path, shows_stylized, trajectory_cameras, trajectory_limits, user_choices,
+    view_camera, view_fov,
 )
 from stylize3d_core.errors import InputError
+from stylize3d_core.geometry.camera_range import CameraRange
 from stylize3d_core.geometry.trajectories import TrajectorySettings, make_trajectory, static
 from stylize3d_core.pipeline import PhotoSpec
 from stylize3d_core.render.plain import frame_size
@@ -74,22 +76,41 @@ def test_sizes():
         frame_size((0, 10), 64)
 
 
-def test_preview_size_adapts_to_the_time_budget():
-    p = PreviewSettings(target_preview_s=0.1, max_preview_long_side=384)
-    assert adapt_preview_long_side(256, 0.1, p) == 256  # on target: keep
-    assert adapt_preview_long_side(256, 0.11, p) == 256  # within 20 %: keep (no flicker)
-    smaller = adapt_preview_long_side(256, 0.4, p)
-    assert smaller < 256 and smaller % 16 == 0 and smaller >= 256 / 1.5 - 16
-    larger = adapt_preview_long_side(256, 0.02, p)
-    assert 256 < larger <= 256 * 1.25 + 16 and larger % 16 == 0
-    assert adapt_preview_long_side(p.min_preview_long_side, 5.0, p) == p.min_preview_long_side
-    assert adapt_preview_long_side(p.max_preview_long_side, 0.001, p) == p.max_preview_long_side
-    assert adapt_preview_long_side(256, float("nan"), p) == 256
-    # Repeated slow frames converge to the floor, fast ones to the cap.
-    side = 256
-    for _ in range(20):
-        side = adapt_preview_long_side(side, 1.0, p)
-    assert side == p.min_preview_long_side
+def test_preview_cost_model_fits_fixed_and_per_pixel_parts():
+    # Exact data of t = 0.01 + 2e-6 * side**2 at three sizes (repeated, with one spike at 128 px).
+    samples = [(64, 0.01 + 2e-6 * 64 ** 2), (128, 0.01 + 2e-6 * 128 ** 2), (128, 5.0), (128, 0.01 + 2e-6 * 128 ** 2),
+               (192, 0.01 + 2e-6 * 192 ** 2)]
+    a, b = preview_cost_model(samples)
+    assert a == pytest.approx(0.01, abs=1e-9) and b == pytest.approx(2e-6, rel=1e-6)  # medians per size
+    a, b = preview_cost_model([(100, 0.05), (100, 0.07), (100, 0.06)])  # one size: all per pixel
+    assert a == 0.0 and b == pytest.approx(0.06 / 100 ** 2)
+    assert preview_cost_model([]) is None and preview_cost_model([(100, float("nan")), (0, 1.0)]) is None
+
+
+def test_preview_size_is_chosen_from_the_measured_throughput():
+    p = PreviewSettings(target_preview_s=0.04, min_preview_long_side=64, preview_long_side=128,
+                        max_preview_long_side=384)
+    cost = lambda side: 0.01 + 2e-6 * side ** 2  # noqa: E731  the budget fits sqrt(0.03 / 2e-6) = 122 px
+    assert choose_preview_long_side([], 128, p) == 128  # nothing measured: keep
+    assert choose_preview_long_side([(128, cost(128))], 128, p) == 128  # predicted 0.043 s: within 10 % over
+    # Driven by its own measurements from either side, it settles within a step of 122 px and stays.
+    for start in (64, 384):
+        side, samples = start, []
+        for _ in range(30):
+            samples.append((side, cost(side)))
+            side = choose_preview_long_side(samples, side, p)
+        assert 112 <= side <= 128 and side % 8 == 0
+        assert choose_preview_long_side(samples + [(side, cost(side))], side, p) == side
+        assert 0.85 * 0.04 <= cost(side) <= 1.1 * 0.04
+    # Damped: a single slow frame shrinks by at most 1.5x; a fast one grows by at most 1.25x.
+    assert choose_preview_long_side([(240, 1.0)], 240, p) == 160
+    assert choose_preview_long_side([(160, 1e-4)], 160, p) == 200
+    # The fixed part alone over budget: down to the floor; tiny costs: up to the cap.
+    side = 200
+    for _ in range(10):
+        side = choose_preview_long_side([(64, 0.06), (200, 0.2)], side, p)  # fixed part 0.044 s
+    assert side == 64
+    assert choose_preview_long_side([(384, 1e-4)], 384, p) == 384
     with pytest.raises(InputError):
         PreviewSettings(preview_long_side=50, min_preview_long_side=96)
 
@@ -196,3 +217,37 @@ def test_recent_files_most_recent_first_without_duplicates():
     assert r == ("c.jpg", "a.jpg")
     with pytest.raises(InputError):
         ViewState(mix=1.5)
+
+
+def test_trajectory_limits_follow_the_photos_camera_range():
+    scene = OrbitScene(centre_depth=0.7, near_depth=1 / 3)
+    full = trajectory_limits(CameraRange(), scene)
+    assert full.max_xy == pytest.approx(0.1)  # the range's pan
+    assert full.min_forward == pytest.approx(-0.3 * 0.7)
+    assert full.max_forward == pytest.approx(min(0.6 * 0.7, 0.5 / 3))  # kept the near margin in front
+    small = trajectory_limits(CameraRange().scaled(0.1), scene)  # a photo with a narrow clean range
+    assert small.max_xy == pytest.approx(0.02) and small.max_forward == pytest.approx(0.05)  # the defaults stay
+    assert small.min_forward == pytest.approx(-0.03 * 0.7)
+    t = clamp_trajectory(TrajectorySettings(x=0.09, y=(-0.2, 0.05), z=(-0.5, 0.3)), small)
+    assert t.x == pytest.approx(0.02) and t.y == pytest.approx((-0.02, 0.02))
+    assert t.z == pytest.approx((-0.021, 0.05))
+    assert clamp_trajectory(TrajectorySettings(z=0.3), small).z == pytest.approx((-0.021, 0.05))  # a: (-a, a)
+    default = TrajectorySettings()
+    assert clamp_trajectory(default, small) == replace(default, x=0.02, y=0.02, z=(0.0, 0.05))  # unchanged
+
+
+def test_typed_paths_in_open_dialogs_must_name_an_existing_file(tmp_path, monkeypatch):
+    (tmp_path / "photos").mkdir()
+    photo = tmp_path / "photos" / "cat.jpg"
+    photo.write_bytes(b"x")
+    monkeypatch.setenv("HOME", str(tmp_path))
+    assert resolve_open_path(str(photo), "/elsewhere") == str(photo)  # absolute: as it is
+    assert resolve_open_path("cat.jpg", str(tmp_path / "photos")) == str(photo)  # relative to the folder
+    assert resolve_open_path("../photos/./cat.jpg ", str(tmp_path / "photos")) == str(photo)
+    assert resolve_open_path("~/photos/cat.jpg", None) == str(photo)  # ~ expanded
+    with pytest.raises(InputError, match=r"dog\.jpg: no such file"):
+        resolve_open_path("dog.jpg", str(tmp_path / "photos"))
+    with pytest.raises(InputError, match="is a folder"):
+        resolve_open_path(str(tmp_path / "photos") + "/", None)
+    with pytest.raises(InputError, match="type a file name"):
+        resolve_open_path("   ", None)
