@@ -255,9 +255,8 @@ class ViewerSession:
         if self.photo is None:
             raise InputError("photo", "open a photo first")
         if stylized and self._stylized is not None and self.layers is not None:
-            if should_stop is not None and should_stop():
-                raise RenderInterrupted("render stopped before the layered composition")
-            return self.layers.renderer(self._stylized, self.strength).render(camera, height, width, preview=preview)
+            return self.layers.renderer(self._stylized, self.strength).render(camera, height, width, preview=preview,
+                                                                              should_stop=should_stop)
         if stylized and self._stylized is not None:
             return self._stylized.render(camera, height, width, preview=preview, should_stop=should_stop)
         if should_stop is not None and should_stop():

@@ -85,10 +85,11 @@ class _AtStrength:
     def __init__(self, stylized, strength: float) -> None:
         self.stylized, self.strength = stylized, float(strength)
 
-    def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False) -> np.ndarray:
+    def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False,
+               should_stop: Optional[Callable[[], bool]] = None) -> np.ndarray:
         if self.stylized.strength != self.strength:
             self.stylized.set_strength(self.strength)
-        return self.stylized.render(camera, height, width, preview=preview)
+        return self.stylized.render(camera, height, width, preview=preview, should_stop=should_stop)
 
 
 class LayeredRenderer:
@@ -116,20 +117,26 @@ class LayeredRenderer:
         self.foreground: ViewRenderer = (PlainRenderer(photo.points, settings) if foreground_strength is None
                                          else _AtStrength(stylized, foreground_strength))
 
-    def coverage(self, camera: Cameras, height: int, width: int) -> np.ndarray:
+    def coverage(self, camera: Cameras, height: int, width: int, *,
+                 should_stop: Optional[Callable[[], bool]] = None) -> np.ndarray:
         """(H, W) float32 in [0, 1]: how much of each pixel's front surface is foreground."""
         raster = RasterSettings(height=int(height), width=int(width), depth_tolerance=self.settings.depth_tolerance,
                                 supersample=self.settings.supersample)
         with torch.inference_mode():
-            frags = PointRasterizer(raster)(self._xyz, self._fg, camera)
+            frags = PointRasterizer(raster)(self._xyz, self._fg, camera, should_stop=should_stop)
             cov = fill_holes(frags.image, frags.hole).clamp_(0.0, 1.0)[0]  # (H, W)
         return cov.numpy()
 
-    def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False) -> np.ndarray:
-        """One frame (H, W, 3) float32 in [0, 1]."""
-        cov = self.coverage(camera, height, width)[..., None]
-        fg = self.foreground.render(camera, height, width, preview=preview)
-        bg = self.background.render(camera, height, width, preview=preview)
+    def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False,
+               should_stop: Optional[Callable[[], bool]] = None) -> np.ndarray:
+        """One frame (H, W, 3) float32 in [0, 1].
+
+        ``should_stop`` is passed to each of the three renders (coverage, foreground,
+        background): True stops with :class:`~stylize3d_core.errors.RenderInterrupted`.
+        """
+        cov = self.coverage(camera, height, width, should_stop=should_stop)[..., None]
+        fg = self.foreground.render(camera, height, width, preview=preview, should_stop=should_stop)
+        bg = self.background.render(camera, height, width, preview=preview, should_stop=should_stop)
         return np.clip(cov * fg + (1.0 - cov) * bg, 0.0, 1.0).astype(np.float32)
 
     def frames(self, cameras: Cameras, height: int, width: int) -> Iterator[np.ndarray]:
