@@ -50,7 +50,11 @@ Stage 3 of the pipeline (docs/architecture.md, "Pipeline stages"), after 3DPhoto
 6. **Border.** The canvas is extended by ``pad`` pixels on every side (step 4).
    Colour: push-pull continuation of the photo (blur grows with the distance
    from the photo, no mirrored seams). Depth: the push-pull continuation of
-   ``nd``, never closer than the replicated photo-border pixel.
+   ``nd``, never closer than the replicated photo-border pixel. With
+   ``border_hidden`` (default), where a foreground edge comes within ``pad`` of
+   the frame, border pixels whose layer 0 continues a foreground cut by the
+   frame's edge get a hidden sample: the photo's background alone continued
+   the same way.
 
 Coordinates: canvas pixel ``(i, j)`` is photo pixel ``(i - pad, j - pad)``.
 """
@@ -165,12 +169,13 @@ class LDISettings:
     of the nearest background source (flat behind every edge pixel)."""
     fit_sigma: float = 2.0
     """Radius (pixels) of the local linear fits of the background behind an edge."""
-    border_hidden: bool = False
+    border_hidden: bool = True
     """Give the border a hidden layer behind foreground that the frame's edge cuts (the
     background continued past the frame), so a camera looking past the edge sees no hole
-    behind, e.g., a tower cut by the frame. Off by default: rocket's holes at the trajectories'
-    extremes went only from 0.339 % to 0.335 % (its full dolly unchanged), and a smooth slanted
-    surface reaching the frame's edge gets a needless hidden layer there."""
+    behind, e.g., a tower cut by the frame: rocket's holes at the dolly zoom's widened FOV
+    0.202 % -> 0.070 % (+11 % points). Only as wide as the border, which is sized for the
+    camera range; a smooth slanted surface reaching the frame's edge may get a needless
+    hidden layer there."""
     max_colour_step: float = 0.05
     """Largest change the colour's gradient may bring, per channel (in [0, 1] colour units)."""
 
@@ -323,7 +328,7 @@ def build_ldi(
         hidden_mask[inner] = mask1
         hidden_rgb[inner][mask1] = rgb1[mask1]
         hidden_depth[inner][mask1] = NEAR_DEPTH / nd1[mask1]
-    if pad > 0 and settings.border_hidden:
+    if pad > 0 and settings.border_hidden and _edges_near_frame(fg, pad):
         _border_hidden(image, nd, nd0, pad, settings, hidden_mask, hidden_rgb, hidden_depth)
     fg_c = np.zeros((hc, wc), bool)
     bg_c = np.zeros((hc, wc), bool)
@@ -663,6 +668,13 @@ def _nearest_surface(
         fb = extrapolate(col_fit, nearest, source, s.max_colour_step, band)
         rgb[~found] = fb[br[~found], bc[~found]]
     return out, np.clip(rgb, 0.0, 1.0).astype(np.float32)
+
+
+def _edges_near_frame(fg: np.ndarray, pad: int) -> bool:
+    """Whether a foreground edge comes within ``pad`` pixels of the photo's frame (something in
+    front may be cut by it; with none, e.g. a slanted plane, the border needs no hidden layer)."""
+    k = min(pad, min(fg.shape) // 2)
+    return bool(fg[:k].any() or fg[-k:].any() or fg[:, :k].any() or fg[:, -k:].any())
 
 
 def _border_hidden(
