@@ -569,8 +569,12 @@ def _hidden_layer(
         dist = cv2.distanceTransform(not_edge, cv2.DIST_L2, 5)  # (h, w) to the nearest edge pixel
         ref = ndc[members][nearest_edge]  # (h, w) nd of the nearest foreground-edge pixel
         local_min = cv2.erode(ndc, np.ones((2 * band_px + 3, 2 * band_px + 3), np.uint8))  # farthest nd nearby
-        # foreground side only: a pixel clearly behind its nearest foreground edge is background
-        band = (dist <= width) & (width > 0) & (ndc - local_min > t) & (ndc >= ref - t)
+        # foreground side only: a pixel clearly behind its nearest foreground edge is background,
+        # unless it is the foreground of an edge of its own nearby (a middle layer: a tower's
+        # base behind a pole, before the sky)
+        window = np.ones((2 * band_px + 1, 2 * band_px + 1), np.uint8)
+        own_fg = cv2.erode(np.where(members, ndc, np.float32(1e9)).astype(np.float32), window)  # (h, w)
+        band = (dist <= width) & (width > 0) & (ndc - local_min > t) & ((ndc >= ref - t) | (own_fg <= ndc + t))
         if not band.any():
             continue
         # Anti-aliased pixels on either side of a tear mix foreground and background colours.
