@@ -5,7 +5,7 @@ Nothing here validates its input: the public functions in ``ldi.py`` do.
 
 from __future__ import annotations
 
-from typing import List, NamedTuple, Optional, Tuple
+from typing import List, NamedTuple, Optional, Sequence, Tuple, Union
 
 import cv2
 import numpy as np
@@ -210,7 +210,8 @@ class LinearFit(NamedTuple):
 
 
 def local_linear_fit(
-    values: np.ndarray, weight: np.ndarray, sigma: float, ridge: float = 0.02, damp: bool = False
+    values: np.ndarray, weight: np.ndarray, sigma: float, ridge: Union[float, Sequence[float]] = 0.02,
+    damp: Union[bool, Sequence[bool]] = False,
 ) -> LinearFit:
     """Moving least squares: at every pixel, the plane fitted to the weighted values around it.
 
@@ -226,8 +227,9 @@ def local_linear_fit(
         values: (H, W, C) float.
         weight: (H, W) float in [0, 1].
         sigma: Gaussian radius in pixels.
-        ridge: regularisation, relative to ``sigma**2``.
-        damp: scale the gradient by the fit's R^2 (the share of the values' local variance
+        ridge: regularisation, relative to ``sigma**2``: one value, or one per channel (the
+            position moments are shared, so fitting channels together costs less).
+        damp: (one, or one per channel) scale the gradient by the fit's R^2 (the share of the values' local variance
             the plane explains), from 0 at ``_R2_NOISE`` to 1 at ``_R2_SMOOTH``: noise-like
             texture gets no gradient, smooth shading keeps it.
     """
@@ -251,17 +253,25 @@ def local_linear_fit(
     mv = g(wv) * inv[..., None]  # (H, W, C)
     cvx = g(wv * x[..., None]) * inv[..., None] - mv * mx[..., None]
     cvy = g(wv * y[..., None]) * inv[..., None] - mv * my[..., None]
-    lam = ridge * sigma * sigma
-    a, b, d = cxx + lam, cxy, cyy + lam
+    c = v.shape[-1]
+    lam = (np.broadcast_to(np.asarray(ridge, np.float32), (c,)) * sigma * sigma)  # (C,)
+    a, b, d = cxx[..., None] + lam, cxy[..., None], cyy[..., None] + lam  # (H, W, C)
     det = np.maximum(a * d - b * b, 1e-12)
-    gx = (d[..., None] * cvx - b[..., None] * cvy) / det[..., None]
-    gy = (a[..., None] * cvy - b[..., None] * cvx) / det[..., None]
-    if damp:  # keep the gradient where the plane explains the local variance, drop it on noise
+    gx = (d * cvx - b * cvy) / det
+    gy = (a * cvy - b * cvx) / det
+    damped = np.broadcast_to(np.asarray(damp, bool), (c,))
+    if damped.any():  # keep the gradient where the plane explains the local variance, drop it on noise
         var = g(wv * v) * inv[..., None] - mv * mv  # (H, W, C)
         r2 = (gx * cvx + gy * cvy) / np.maximum(var, 1e-12)  # R^2 of the (ridge-shrunk) fit
         keep = np.clip((r2 - _R2_NOISE) / (_R2_SMOOTH - _R2_NOISE), 0.0, 1.0)
+        keep[..., ~damped] = 1.0
         gx, gy = gx * keep, gy * keep
     return LinearFit(mv, np.stack([mx + w / 2.0, my + h / 2.0], axis=-1), np.stack([gx, gy], axis=-1), s0)
+
+
+def split_fit(fit: LinearFit, channels: slice) -> LinearFit:
+    """The fit of some of its channels (the positions and support are shared)."""
+    return LinearFit(fit.mean[..., channels], fit.centre, fit.grad[..., channels, :], fit.support)
 
 
 def extrapolate(

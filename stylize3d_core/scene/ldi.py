@@ -79,7 +79,7 @@ from ..geometry.camera_range import (
 from ..io.images import to_uint8
 from ._fill import (
     LinearFit, box_clusters, continue_at, cross_median, extrapolate, local_linear_fit, nearest_index, push_pull,
-    ring_min, scan_nearest, torn_regions,
+    ring_min, scan_nearest, split_fit, torn_regions,
 )
 
 ORIGINAL = 0
@@ -591,13 +591,21 @@ def _hidden_layer(
         nearest = nearest_index(source)  # (h, w)
         srcw = source.astype(np.float32)
         lo = 0.5 * float(ndc[source].min())  # never much farther than anything seen
-        nd_fit = local_linear_fit(ndc[..., None], srcw, s.fit_sigma, ridge=_DEPTH_RIDGE) if s.hidden_depth != "nearest" else None
+        want_nd, want_rgb = s.hidden_depth != "nearest", s.inpaint_method == "linear"
+        nd_fit = col_fit = None
+        if want_nd and want_rgb:  # one fit of the four channels (shared position moments)
+            both = local_linear_fit(np.concatenate([ndc[..., None], rgbc], axis=2), srcw, s.fit_sigma,
+                                    ridge=(_DEPTH_RIDGE,) + (_COLOUR_RIDGE,) * 3, damp=(False, True, True, True))
+            nd_fit, col_fit = split_fit(both, slice(0, 1)), split_fit(both, slice(1, 4))
+        elif want_nd:
+            nd_fit = local_linear_fit(ndc[..., None], srcw, s.fit_sigma, ridge=_DEPTH_RIDGE)
+        elif want_rgb:
+            col_fit = local_linear_fit(rgbc, srcw, s.fit_sigma, ridge=_COLOUR_RIDGE, damp=True)
         if nd_fit is not None:  # continue the background's local plane (nd is affine on it)
             bg_nd = np.maximum(extrapolate(nd_fit, nearest, source, _DEPTH_STEP * s.disparity_jump, band)[..., 0], lo)
             bg_nd = np.where(source, ndc, bg_nd)
         else:
             bg_nd = ndc[source][nearest]  # (h, w)
-        col_fit = local_linear_fit(rgbc, srcw, s.fit_sigma, ridge=_COLOUR_RIDGE, damp=True) if s.inpaint_method == "linear" else None
         chosen_rgb = None
         if s.hidden_depth == "surface":
             bg_nd, chosen_rgb = _nearest_surface(nd_fit, col_fit, source, band, ndc, bg_nd, lo, s)
