@@ -25,6 +25,7 @@ Run from the repository root: ``.venv/bin/python benchmarks/bench_holes.py [--si
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from pathlib import Path
 from typing import List, Tuple
@@ -40,6 +41,7 @@ from stylize3d_core.geometry.camera_range import (  # noqa: E402
     CameraRange, clamp_dolly, range_corner_poses, trajectory_extreme_cameras,
 )
 from stylize3d_core.render.plain import PlainRenderer, PlainRenderSettings, frame_size  # noqa: E402
+from stylize3d_core.scene.ldi import LDISettings  # noqa: E402
 from stylize3d_core.scene.photo3d import Photo3D, Photo3DSettings  # noqa: E402
 
 sys.path.insert(1, str(ROOT / "benchmarks"))
@@ -53,11 +55,14 @@ def full_dolly(rng: CameraRange, centre_depth: float, near_depth: float) -> np.n
     return T
 
 
-def hole_shares(p3d: Photo3D, rng: CameraRange, size: int, grow: bool = True) -> Tuple[List[float], List[float], float]:
+def hole_shares(p3d: Photo3D, rng: CameraRange, size: int, grow: bool = True,
+                depth_tolerance: float = PlainRenderSettings().depth_tolerance,
+                stretch: bool = True) -> Tuple[List[float], List[float], float]:
     """Hole share (0..1) at each corner of ``rng``, at each trajectory extreme, and at the
     default range's full forward dolly."""
     H, W = frame_size(p3d.size, size)
-    renderer = PlainRenderer(p3d.points, PlainRenderSettings(grow_splats=grow))
+    renderer = PlainRenderer(p3d.points, PlainRenderSettings(grow_splats=grow, depth_tolerance=depth_tolerance,
+                                                          stretch_splats=stretch))
     ldi = p3d.ldi
     corners = range_corner_poses(rng, ldi.centre_depth, ldi.near_depth)
     viewer = [float(renderer.rasterize(Cameras.create(T, p3d.fov_y_deg), H, W).hole.float().mean())
@@ -75,16 +80,29 @@ def main() -> None:
     parser.add_argument("--range", choices=("default", "photo"), default="default",
                         help="the viewer's default range, or the part of it each photo supports")
     parser.add_argument("--bilinear", action="store_true", help="bilinear splats (no growth with magnification)")
+    parser.add_argument("--no-stretch", action="store_true", help="splats grow with the magnification only")
+    parser.add_argument("--photos", default="", help="comma-separated photo names (default: all)")
+    parser.add_argument("--border-hidden", choices=("default", "on", "off"), default="default",
+                        help="LDISettings.border_hidden (the hidden layer behind what the frame's edge cuts)")
+    parser.add_argument("--depth-tolerance", type=float, default=PlainRenderSettings().depth_tolerance,
+                        help="the renderer's z-test band; 1.0 keeps every tap (holes then are pure coverage gaps)")
     args = parser.parse_args()
+    only = {n for n in args.photos.split(",") if n}
+    ldi_settings = LDISettings()
+    if args.border_hidden != "default":
+        ldi_settings = dataclasses.replace(ldi_settings, border_hidden=args.border_hidden == "on")
     depth_source = PriorDepth()
     print(f"{'photo':>18} {'size':>9} {'points':>9} {'ldi s':>6} {'range':>6} "
           f"{'viewer max %':>12} {'fwd dolly %':>11} {'traj max %':>10} {'full dolly %':>12}")
     worst = 0.0
     for name, rgb in test_photos(args.size):
+        if only and name not in only:
+            continue
         depth = estimate_depth(depth_source, rgb)
-        p3d = Photo3D.build(rgb, depth, Photo3DSettings())
+        p3d = Photo3D.build(rgb, depth, Photo3DSettings(ldi=ldi_settings))
         rng = CameraRange() if args.range == "default" else p3d.camera_range
-        viewer, traj, dolly = hole_shares(p3d, rng, args.size, grow=not args.bilinear)
+        viewer, traj, dolly = hole_shares(p3d, rng, args.size, grow=not args.bilinear,
+                                          depth_tolerance=args.depth_tolerance, stretch=not args.no_stretch)
         # corners alternate backward / forward dolly; the 9th pair is the straight dolly
         fwd = viewer[9] if len(viewer) > 9 else float("nan")
         scale = getattr(p3d.ldi, "range_scale", 1.0) if args.range == "photo" else 1.0

@@ -2,7 +2,10 @@
 
 The stylized path decodes rasterized features with the model's U-Net instead;
 this path shows the photo's own colours and is the baseline the stylization is
-compared with.
+compared with. Splats grow with the magnification at each point and, on full
+frames of an LDI's cloud, stretch to the next point of the same surface in the
+view (``PlainRenderSettings.stretch_splats``), so neither a dolly in nor a
+slanted surface shows a grid of gaps.
 
 Previews (both paths) rasterize a *prefix* of the points held in a fixed
 :class:`StratifiedOrder`, i.e. a uniform random subset of (up to 1/8 more
@@ -22,7 +25,8 @@ import torch
 
 from ..checks import check_range
 from ..errors import InputError, RenderInterrupted
-from ..geometry.camera import Cameras, focal_from_fov
+from ..geometry.camera import NEAR_DEPTH, Cameras, focal_from_fov
+from ..scene.ldi import INPAINTED, ORIGINAL
 from ..scene.pointcloud import PointCloud, PointTensors
 from .holes import fill_holes
 from .rasterize import Fragments, RasterSettings
@@ -49,6 +53,12 @@ class PlainRenderSettings:
         soft_edges: True (default): silhouettes keep their size however large the splats
             grow (``RasterSettings.soft_edges``); False: every splat tap can occlude, and a
             grown splat's faint fringe can hide the surface behind it.
+        stretch_splats: True (default): with ``grow_splats``, on full frames of an LDI's
+            cloud (:func:`canvas_grid_shape`), a layer-0 point's splat also spans the gap
+            to its farthest 4-neighbour in the view where no tear lies between them
+            (their disparities differ by at most :data:`STRETCH_JUMP`): a surface seen at
+            a slant or magnified unevenly (a forward dolly over rough depth) shows no
+            gaps. False: the splat grows with the magnification at the point only.
     """
 
     supersample: int = 1
@@ -57,12 +67,53 @@ class PlainRenderSettings:
     seed: int = 0
     grow_splats: bool = True
     soft_edges: bool = True
+    stretch_splats: bool = True
 
     def __post_init__(self) -> None:
         if self.supersample not in (1, 2):
             raise InputError("supersample", f"must be 1 or 2, got {self.supersample!r}")
         check_range(self.depth_tolerance, "depth_tolerance", 0.0, 1.0)
         check_range(self.preview_points_per_pixel, "preview_points_per_pixel", 0.5, 100.0)
+
+
+STRETCH_JUMP = 0.04
+"""Neighbours whose normalised disparity (``NEAR_DEPTH / z`` in scene units) differs by at
+most this lie on one surface for :attr:`PlainRenderSettings.stretch_splats`: the LDI's
+default tear threshold (``LDISettings.disparity_jump``), so torn neighbours never stretch."""
+
+
+STRETCH_MIN = 1.2
+"""A splat stretches to its neighbours only where they lie more than this many of its
+half-widths away in the view."""
+
+
+def canvas_grid_shape(points: PointCloud) -> Optional[Tuple[int, int]]:
+    """(Hc, Wc) when ``points`` starts with an LDI canvas in raster order, as
+    :func:`~stylize3d_core.scene.pointcloud.ldi_to_points` lays it out (layer 0: every
+    canvas pixel, labels ORIGINAL inside the photo and BORDER outside, then only hidden
+    points), else None."""
+    h, w = points.image_size
+    label = points.label
+    n0 = int(np.count_nonzero(label != INPAINTED))
+    if n0 < h * w or (label[n0:] != INPAINTED).any() or (label[:n0] == INPAINTED).any():
+        return None
+    # (h + 2 p)(w + 2 p) = n0
+    pad = (-(h + w) + math.sqrt((h + w) ** 2 - 4 * (h * w - n0))) / 4.0
+    p = int(round(pad))
+    if (h + 2 * p) * (w + 2 * p) != n0:
+        return None
+    hc, wc = h + 2 * p, w + 2 * p
+    grid = label[:n0].reshape(hc, wc)
+    if (grid[p:p + h, p:p + w] != ORIGINAL).any() or (grid == ORIGINAL).sum() != h * w:
+        return None
+    f = focal_from_fov(points.fov_y_deg, h)
+    xyz = points.xyz[:n0].reshape(hc, wc, 3)
+    rays = xyz[..., 0] / xyz[..., 2], xyz[..., 1] / xyz[..., 2]  # x / z, y / z
+    want_x = (np.arange(wc) - p + 0.5 - w / 2.0) / f
+    want_y = (np.arange(hc) - p + 0.5 - h / 2.0) / f
+    if (np.abs(rays[0] - want_x[None]).max() > 1e-4) or (np.abs(rays[1] - want_y[:, None]).max() > 1e-4):
+        return None
+    return hc, wc
 
 
 PREVIEW_MIN_POINTS = 1024
@@ -156,9 +207,20 @@ class PlainRenderer:
         self._xyz = t.xyz.index_select(0, order)  # (N, 3)
         self._rgb = t.rgb.index_select(0, order)  # (N, 3)
         self._size: Optional[torch.Tensor] = None  # (N,) footprint of each point, scene units
+        self._grid: Optional[Tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = None
         if settings.grow_splats and isinstance(points, PointCloud):
             f = focal_from_fov(points.fov_y_deg, points.image_size[0])
             self._size = self._xyz[:, 2].abs() / f
+            shape = canvas_grid_shape(points)
+            if shape is not None and settings.stretch_splats:
+                hc, wc = shape
+                xyz0 = t.xyz[: hc * wc].reshape(hc, wc, 3)
+                nd = NEAR_DEPTH / xyz0[..., 2]  # (Hc, Wc) normalised disparity (scene units)
+                # right and down neighbours on one surface (no tear between them)
+                self._grid = (xyz0, (nd[:, 1:] - nd[:, :-1]).abs() <= STRETCH_JUMP,
+                              (nd[1:] - nd[:-1]).abs() <= STRETCH_JUMP)
+                self._inverse = torch.empty_like(order)
+                self._inverse[order] = torch.arange(order.numel())  # original index -> position
         self.settings = settings
 
     @property
@@ -185,9 +247,45 @@ class PlainRenderer:
         size = self._size
         if size is not None and keep < self.num_points:  # a full frame uses the cached sizes as they are
             size = size[:keep] * math.sqrt(self.num_points / max(keep, 1))
+        elif size is not None and self._grid is not None:
+            size = self._stretched_sizes(camera, height)
         with torch.inference_mode():
             return PointRasterizer(raster)(self._xyz[:keep], self._rgb[:keep], camera, size,
                                            should_stop=should_stop)
+
+    def _stretched_sizes(self, camera: Cameras, height: int) -> torch.Tensor:
+        """(N,) footprints (renderer order) that also span the gap to each neighbour in this view.
+
+        A surface seen at a slant from the new camera spreads its photo pixels apart by
+        more than the magnification at the points: each layer-0 point's splat half-width
+        (in view pixels) becomes at least the distance to its farthest untorn 4-neighbour
+        there (where that exceeds :data:`STRETCH_MIN` times its own), as a bilinear splat's
+        half-width is the spacing of its points."""
+        xyz0, link_h, link_v = self._grid
+        hc, wc = xyz0.shape[:2]
+        with torch.inference_mode():
+            w2c = camera.world_to_cam()[0].to(xyz0.dtype)  # (4, 4)
+            pc = xyz0 @ w2c[:3, :3].T + w2c[:3, 3]  # (Hc, Wc, 3) camera coordinates
+            z = pc[..., 2].clamp_min(1e-6)
+            f = focal_from_fov(float(camera.fov_y_deg[0]), int(height))
+            uv = pc[..., :2] / z[..., None] * f  # (Hc, Wc, 2) view pixels (up to the principal point)
+            dh = torch.where(link_h, (uv[:, 1:] - uv[:, :-1]).norm(dim=-1), 0.0)  # (Hc, Wc - 1)
+            dv = torch.where(link_v, (uv[1:] - uv[:-1]).norm(dim=-1), 0.0)  # (Hc - 1, Wc)
+            gap = torch.zeros(hc, wc, dtype=xyz0.dtype)
+            gap[:, :-1] = dh
+            gap[:, 1:] = torch.maximum(gap[:, 1:], dh)
+            gap[:-1] = torch.maximum(gap[:-1], dv)
+            gap[1:] = torch.maximum(gap[1:], dv)
+            size = self._size.clone()
+            pos = self._inverse[: hc * wc]
+            base = size[pos]  # (Hc Wc,) footprint from the magnification, scene units
+            gap, z = gap.reshape(-1), z.reshape(-1)
+            # a tent overlaps its neighbours' up to a spacing of twice its half-width: stretch only
+            # where the spacing exceeds STRETCH_MIN times it (a nearly unstretched splat keeps its
+            # 2 x 2 bilinear taps, so rasterization costs the same there)
+            wide = gap > STRETCH_MIN * torch.clamp_min(base * f / z, 1.0)
+            size[pos] = torch.where(wide, torch.maximum(base, gap * z / f), base)
+        return size
 
     def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False,
                should_stop: Optional[Callable[[], bool]] = None) -> np.ndarray:

@@ -5,7 +5,7 @@ Nothing here validates its input: the public functions in ``ldi.py`` do.
 
 from __future__ import annotations
 
-from typing import List, NamedTuple, Tuple
+from typing import List, NamedTuple, Optional, Sequence, Tuple, Union
 
 import cv2
 import numpy as np
@@ -187,3 +187,150 @@ def box_clusters(mask: np.ndarray, pad: int) -> List[Tuple[slice, slice, np.ndar
         if members.any():
             boxes.append((rows, cols, members))
     return boxes
+
+
+_R2_NOISE, _R2_SMOOTH = 0.25, 0.6
+"""Damped fits: no gradient at an R^2 up to _R2_NOISE (noise-like texture), all of it from _R2_SMOOTH."""
+
+
+class LinearFit(NamedTuple):
+    """Per-pixel weighted linear fit ``v(q) ~ mean + grad . (q - centre)`` (see :func:`local_linear_fit`).
+
+    Attributes:
+        mean: (H, W, C) float64 weighted mean of the values near each pixel.
+        centre: (H, W, 2) float64 weighted mean position (x = column, y = row) of those sources.
+        grad: (H, W, C, 2) float64 gradient (d/dx, d/dy) of the fit.
+        support: (H, W) float64 blurred weight (0 where no source is near).
+    """
+
+    mean: np.ndarray
+    centre: np.ndarray
+    grad: np.ndarray
+    support: np.ndarray
+
+
+def local_linear_fit(
+    values: np.ndarray, weight: np.ndarray, sigma: float, ridge: Union[float, Sequence[float]] = 0.02,
+    damp: Union[bool, Sequence[bool]] = False,
+) -> LinearFit:
+    """Moving least squares: at every pixel, the plane fitted to the weighted values around it.
+
+    Gaussian-weighted (``sigma`` pixels) moments of the weighted pixels give the
+    centroid, the position covariance and the value-position covariance; the
+    gradient solves the 2x2 normal equations with ``ridge * sigma**2`` added to
+    the diagonal (sources on a line give no gradient across it). A plane is
+    reproduced exactly (up to the ridge's shrinkage) wherever the sources span
+    2D: the disparity ``1 / z`` of a planar surface is affine in the image, so
+    ``mean + grad . (p - centre)`` continues a plane's depth past its sources.
+
+    Args:
+        values: (H, W, C) float.
+        weight: (H, W) float in [0, 1].
+        sigma: Gaussian radius in pixels.
+        ridge: regularisation, relative to ``sigma**2``: one value, or one per channel (the
+            position moments are shared, so fitting channels together costs less).
+        damp: (one, or one per channel) scale the gradient by the fit's R^2 (the share of the values' local variance
+            the plane explains), from 0 at ``_R2_NOISE`` to 1 at ``_R2_SMOOTH``: noise-like
+            texture gets no gradient, smooth shading keeps it.
+    """
+    h, w = weight.shape
+    wt = weight.astype(np.float32)
+    v = values.astype(np.float32)
+    y, x = np.mgrid[:h, :w].astype(np.float32)
+    x -= w / 2.0
+    y -= h / 2.0
+
+    def g(a: np.ndarray) -> np.ndarray:
+        return _as3(cv2.GaussianBlur(a, (0, 0), sigma, borderType=cv2.BORDER_CONSTANT))
+
+    s0 = g(wt)[..., 0]
+    inv = 1.0 / np.maximum(s0, 1e-12)
+    mx, my = g(wt * x)[..., 0] * inv, g(wt * y)[..., 0] * inv
+    cxx = g(wt * x * x)[..., 0] * inv - mx * mx
+    cxy = g(wt * x * y)[..., 0] * inv - mx * my
+    cyy = g(wt * y * y)[..., 0] * inv - my * my
+    wv = v * wt[..., None]
+    mv = g(wv) * inv[..., None]  # (H, W, C)
+    cvx = g(wv * x[..., None]) * inv[..., None] - mv * mx[..., None]
+    cvy = g(wv * y[..., None]) * inv[..., None] - mv * my[..., None]
+    c = v.shape[-1]
+    lam = (np.broadcast_to(np.asarray(ridge, np.float32), (c,)) * sigma * sigma)  # (C,)
+    a, b, d = cxx[..., None] + lam, cxy[..., None], cyy[..., None] + lam  # (H, W, C)
+    det = np.maximum(a * d - b * b, 1e-12)
+    gx = (d * cvx - b * cvy) / det
+    gy = (a * cvy - b * cvx) / det
+    damped = np.broadcast_to(np.asarray(damp, bool), (c,))
+    if damped.any():  # keep the gradient where the plane explains the local variance, drop it on noise
+        var = g(wv * v) * inv[..., None] - mv * mv  # (H, W, C)
+        r2 = (gx * cvx + gy * cvy) / np.maximum(var, 1e-12)  # R^2 of the (ridge-shrunk) fit
+        keep = np.clip((r2 - _R2_NOISE) / (_R2_SMOOTH - _R2_NOISE), 0.0, 1.0)
+        keep[..., ~damped] = 1.0
+        gx, gy = gx * keep, gy * keep
+    return LinearFit(mv, np.stack([mx + w / 2.0, my + h / 2.0], axis=-1), np.stack([gx, gy], axis=-1), s0)
+
+
+def split_fit(fit: LinearFit, channels: slice) -> LinearFit:
+    """The fit of some of its channels (the positions and support are shared)."""
+    return LinearFit(fit.mean[..., channels], fit.centre, fit.grad[..., channels, :], fit.support)
+
+
+def extrapolate(
+    fit: LinearFit, nearest: np.ndarray, targets: np.ndarray, max_step: float, where: Optional[np.ndarray] = None
+) -> np.ndarray:
+    """Continue, to every pixel, the linear fit of its nearest source (``nearest_index`` of them).
+
+    ``value(p) = mean(q) + grad(q) . (p - centre(q))`` with ``q`` the nearest source;
+    the step ``grad . (p - centre)`` is clipped to ``[-max_step, max_step]`` per channel.
+
+    Args:
+        fit: the fit over the sources.
+        nearest: (H, W) int indices into the True pixels of ``targets`` (the sources).
+        targets: (H, W) bool, the sources.
+        where: (H, W) bool, the pixels to compute (all by default; 0 elsewhere).
+    Returns:
+        (H, W, C) float32.
+    """
+    h, w = nearest.shape
+    out = np.zeros((h, w, fit.mean.shape[-1]), np.float32)
+    rows, cols = np.nonzero(where) if where is not None else np.nonzero(np.ones((h, w), bool))
+    tr, tc = np.nonzero(targets)
+    k = nearest[rows, cols]
+    at = np.stack([tr[k], tc[k]], axis=1)  # (N, 2) the nearest source of each pixel
+    out[rows, cols] = continue_at(fit, at, (rows.astype(np.float64), cols.astype(np.float64)), max_step)
+    return out
+
+
+def scan_nearest(targets: np.ndarray) -> np.ndarray:
+    """For every pixel, the nearest True pixel of ``targets`` along its row and column, each way.
+
+    Returns:
+        (4, H, W, 2) int64 (row, col) of the nearest target to the left, right, above and
+        below (the pixel itself when it is one); -1 where there is none that way.
+    """
+    h, w = targets.shape
+    rows = np.broadcast_to(np.arange(h)[:, None], (h, w))
+    cols = np.broadcast_to(np.arange(w)[None, :], (h, w))
+    out = np.full((4, h, w, 2), -1, np.int64)
+    left = np.maximum.accumulate(np.where(targets, cols, -1), axis=1)
+    right = np.minimum.accumulate(np.where(targets, cols, w)[:, ::-1], axis=1)[:, ::-1]
+    up = np.maximum.accumulate(np.where(targets, rows, -1), axis=0)
+    down = np.minimum.accumulate(np.where(targets, rows, h)[::-1], axis=0)[::-1]
+    for k, (r, c, ok) in enumerate((
+        (rows, left, left >= 0), (rows, right, right < w), (up, cols, up >= 0), (down, cols, down < h)
+    )):
+        out[k, ..., 0] = np.where(ok, r, -1)
+        out[k, ..., 1] = np.where(ok, c, -1)
+    return out
+
+
+def continue_at(fit: LinearFit, at: np.ndarray, pixels: Tuple[np.ndarray, np.ndarray], max_step: float) -> np.ndarray:
+    """The linear fit at source pixels ``at`` (N, 2) (row, col) continued to ``pixels`` (rows, cols).
+
+    Returns:
+        (N, C) float64 ``mean + clip(grad . (p - centre), -max_step, max_step)``.
+    """
+    r, c = at[:, 0], at[:, 1]
+    mean, centre, grad = fit.mean[r, c], fit.centre[r, c], fit.grad[r, c]  # (N, C), (N, 2), (N, C, 2)
+    dx = (pixels[1] - centre[:, 0])[:, None]
+    dy = (pixels[0] - centre[:, 1])[:, None]
+    return mean + np.clip(grad[..., 0] * dx + grad[..., 1] * dy, -max_step, max_step)
