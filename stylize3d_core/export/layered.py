@@ -20,7 +20,7 @@ is therefore exactly the plain render: its original colours.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Iterator, Optional, Protocol, Tuple
+from typing import Callable, Iterator, Optional, Protocol, Tuple
 
 import numpy as np
 import torch
@@ -37,7 +37,8 @@ from ..scene.photo3d import Photo3D
 
 
 class ViewRenderer(Protocol):
-    def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False) -> np.ndarray: ...
+    def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False,
+               should_stop: Optional[Callable[[], bool]] = None) -> np.ndarray: ...
 
 
 @documented

@@ -73,6 +73,14 @@ def test_foreground_strength(photo3d, square_mask, stylized):
         LayeredRenderer(photo3d, np.zeros(3, bool), stylized)
 
 
+def test_layered_render_stops_when_asked(photo3d, square_mask, stylized):
+    from stylize3d_core.errors import RenderInterrupted
+
+    layered = LayeredRenderer(photo3d, point_mask(photo3d.ldi, square_mask), stylized)
+    with pytest.raises(RenderInterrupted):
+        layered.render(Cameras.identity(photo3d.fov_y_deg), 24, 32, should_stop=lambda: True)
+
+
 def test_layer_settings_bad_input():
     with pytest.raises(InputError, match="not both"):
         LayerSettings(mask="m.png", mask_rect="1,2,3,4")
