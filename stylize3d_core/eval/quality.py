@@ -436,7 +436,7 @@ class QualityPreset:
 
 
 QUICK = QualityPreset(photo_size=192, frame_size=128, frames=10, style_every=3, view_samples=8)
-FULL = QualityPreset(photo_size=512, frame_size=384, frames=30, style_every=5, view_samples=None)
+FULL = QualityPreset(photo_size=384, frame_size=384, frames=30, style_every=5, view_samples=None)
 
 
 def render_methods(photo3d: Photo3D, style_rgb: np.ndarray, cameras: Cameras, height: int, width: int, *,
@@ -501,14 +501,15 @@ def measure_pair(frames: Mapping[str, Sequence[np.ndarray]], style_rgb: np.ndarr
     long_ = warp_rmse(frames, cameras, geometries, long_range_pairs(n), depth_tolerance)
     style_t = torch.from_numpy(np.ascontiguousarray(style, np.float32)).permute(2, 0, 1)[None]
     picked = list(range(0, n, int(style_every)))
+    names = list(frames)
+    with torch.inference_mode():  # one batch: the style image's features are computed once
+        batch = torch.from_numpy(np.stack([np.asarray(frames[m][k], np.float32) for m in names for k in picked]))
+        eff = style_distance(batch.permute(0, 3, 1, 2).contiguous(), style_t).view(len(names), len(picked))
     out: Dict[str, Dict[str, float]] = {}
-    for m, fr in frames.items():
-        with torch.inference_mode():
-            batch = torch.from_numpy(np.stack([np.asarray(fr[k], np.float32) for k in picked])).permute(0, 3, 1, 2)
-            eff = float(style_distance(batch.contiguous(), style_t).mean())
+    for r, (m, fr) in enumerate(frames.items()):
         out[m] = {
             "lab": float(np.mean([lab_distance(f, ref_stats) for f in fr])),
-            "effnet": eff,
+            "effnet": float(eff[r].mean()),
             "sharpness_x_plain": _nanmean([sharpness_ratio(f, p) for f, p in zip(fr, frames["plain"])]),
             "short_rmse": short[m], "long_rmse": long_[m],
         }
