@@ -9,6 +9,7 @@ per-frame 2D network and stylize-then-bake on the same cameras. Writes
 
     .venv/bin/python benchmarks/bench_quality.py [--quick] --out DIR [--model CKPT]
                                                  [--eval-data runs/data/eval] [--strength 0.8] [--threads 2]
+                                                 [--photos chelsea,stereo_motorcycle] [--styles NAME,...]
 
 ``--quick`` takes a few minutes on 2 cores, the full preset (30 frames at 384 px) about 20.
 """
@@ -26,6 +27,19 @@ sys.path.insert(0, str(ROOT))
 
 from stylize3d_core.bench.quality import run_quality  # noqa: E402
 from stylize3d_core.bench.report import markdown_table  # noqa: E402
+from stylize3d_core.eval.quality import QUALITY_PHOTOS, QUALITY_STYLES  # noqa: E402
+
+
+def _pick(items, names, option):
+    """The items of the set named in the comma-separated ``names`` (all for None)."""
+    if names is None:
+        return None
+    by_name = {i.name: i for i in items}
+    wanted = [n.strip() for n in names.split(",") if n.strip()]
+    unknown = [n for n in wanted if n not in by_name]
+    if unknown or not wanted:
+        raise SystemExit(f"{option}: unknown {', '.join(unknown) or '(none given)'}; choose from {', '.join(by_name)}")
+    return tuple(by_name[n] for n in wanted)
 
 
 def main() -> int:
@@ -36,11 +50,17 @@ def main() -> int:
     ap.add_argument("--eval-data", default=None, help="held-out dataset folder (stage-1 PSNR / SSIM; skipped without)")
     ap.add_argument("--strength", type=float, default=None, help="our style strength (default the library's, 0.8)")
     ap.add_argument("--threads", type=int, default=2, help="torch CPU threads (default 2)")
+    ap.add_argument("--photos", default=None, help="comma-separated photos of the set to measure (default all: "
+                    + ",".join(p.name for p in QUALITY_PHOTOS) + ")")
+    ap.add_argument("--styles", default=None, help="comma-separated styles of the set to measure (default all: "
+                    + ",".join(s.name for s in QUALITY_STYLES) + ")")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
+    photos = _pick(QUALITY_PHOTOS, args.photos, "--photos")
+    styles = _pick(QUALITY_STYLES, args.styles, "--styles")
     rows = run_quality(Path(args.out), quick=args.quick, show_progress=True,
                        log=lambda m: print(m, file=sys.stderr, flush=True), model=args.model,
-                       eval_data=args.eval_data, strength=args.strength)
+                       eval_data=args.eval_data, strength=args.strength, photos=photos, styles=styles)
     held = [r for r in rows if r["pairs"] == "held-out"]
     print(markdown_table(held or rows, list((held or rows)[0].keys()), digits=3))
     return 0
