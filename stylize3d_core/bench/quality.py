@@ -137,7 +137,8 @@ def run_quality(out: Path, quick: bool = False, show_progress: bool = False, log
             timings["measure"] = time.perf_counter() - t0
             group = pair_group(photo, style)
             pairs.append({"photo": photo.name, "style": style.name, "photo_seen": photo.seen,
-                          "style_seen": style.seen, "group": group, "metrics": metrics, "seconds": timings})
+                          "style_seen": style.seen, "group": group, "frame_hw": [H, W], "metrics": metrics,
+                          "seconds": timings})
             k = preset.sheet_frame
             sheet_rows.append((f"{photo.name} x {style.name} ({group})",
                                {"photo": p3d.rgb, "style": styles[style.name],
@@ -185,7 +186,7 @@ def run_quality(out: Path, quick: bool = False, show_progress: bool = False, log
     md += [f"* {n}" for n in notes] + [""]
     data = {"title": "Quality: style, sharpness, consistency", "preset": preset.__dict__, "quick": quick,
             "model": model_path, "strength": settings.strength, "photos": [p._asdict() for p in photos],
-            "styles": [s._asdict() for s in style_set], "frame_size": [H, W], "pairs": pairs,
+            "styles": [s._asdict() for s in style_set], "pairs": pairs,
             "summary": summary, "stage1": stage1, "stage1_note": stage1_note, "notes": notes, "seconds": seconds,
             "machine": info}
     write_atomically(out / "quality.json", "quality report",

@@ -330,6 +330,7 @@ def test_run_quality_writes_the_report(tmp_path):
         ("chelsea", "texture_voronoi_seed7", "mixed"), ("chelsea", "tiny_painting", "held-out")]
     for p in data["pairs"]:
         assert set(p["metrics"]) == set(METHODS) and all(set(v) == set(METRICS) for v in p["metrics"].values())
+        assert max(p["frame_hw"]) == 48 and set(p["seconds"]) == {"plain", "ours", "2d", "baked", "measure"}
     assert set(data["summary"]) == {"held-out", "mixed", "all"}
     assert "skipped" in data["stage1_note"] and data["stage1"] == {}
     assert {r["pairs"] for r in rows} == {"held-out", "mixed", "all"} and len(rows) == 3 * len(METHODS)
