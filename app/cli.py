@@ -2,7 +2,7 @@
 
     stylize3d render PHOTO [--depth SPEC] [--trajectory circle] [--frames 90]
                            [--fps 30] [--size 512] [-o out.mp4] [--save-ply FILE]
-    stylize3d bench speed|consistency|scaling|stress|skips [--quick] [--out bench/]
+    stylize3d bench speed|consistency|scaling|stress|skips|quality [--quick] [--out bench/]
 
 Exit status: 0 on success, 2 for bad input (the message names the file or the
 setting), 1 when an output could not be written, 3 for an unexpected internal
@@ -95,7 +95,7 @@ def _add_info(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--json", action="store_true", help="print the report as JSON")
 
 
-BENCH_SUITES = ("speed", "consistency", "scaling", "stress", "skips")
+BENCH_SUITES = ("speed", "consistency", "scaling", "stress", "skips", "quality")
 
 
 def _add_bench(sub: "argparse._SubParsersAction") -> None:
@@ -108,6 +108,8 @@ def _add_bench(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--quick", action="store_true", help="a small preset (seconds; what CI runs)")
     p.add_argument("--photo", default=None, help="photo (default the shipped sample)")
     p.add_argument("--style", default=None, help="style image (default the shipped style)")
+    p.add_argument("--model", default=None, help="quality: the checkpoint measured (default the shipped model)")
+    p.add_argument("--eval-data", default=None, help="quality: held-out dataset folder for stage-1 PSNR/SSIM")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar, print nothing but errors")
 
 
@@ -218,7 +220,7 @@ def _bench(args: argparse.Namespace) -> int:
 
     log = (lambda _msg: None) if args.quiet else (lambda msg: print(f"{PROG}: {msg}", file=sys.stderr))
     rows = run_suite(args.suite, args.out, quick=args.quick, show_progress=not args.quiet, log=log,
-                     photo=args.photo, style=args.style)
+                     photo=args.photo, style=args.style, model=args.model, eval_data=args.eval_data)
     if not args.quiet:
         print(f"{PROG}: bench {args.suite}: {len(rows)} rows in {args.out}/", file=sys.stderr)
     if args.suite == "stress" and not all(r["pass"] for r in rows):

@@ -21,36 +21,15 @@ import argparse
 import sys
 import time
 from pathlib import Path
-from typing import List
 
 import torch
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from stylize3d_core.eval.view_synthesis import (  # noqa: E402
-    KindScores, ViewRecord, evaluate_view_synthesis, score_views, summarize_views,
-)
-from stylize3d_core.render.plain import PlainRenderer  # noqa: E402
+from stylize3d_core.eval.quality import plain_view_scores  # noqa: E402
+from stylize3d_core.eval.view_synthesis import KindScores, evaluate_view_synthesis  # noqa: E402
 from stylize3d_core.train.cache import TrainDataset  # noqa: E402
-
-
-def plain_views(sample) -> torch.Tensor:
-    """(V, 3, H, W) plain renders of the sample's points at its target cameras."""
-    h, w = sample.image_size
-    renderer = PlainRenderer(sample.points)
-    frames = renderer.frames(sample.cameras, h, w)  # (H, W, 3) each
-    return torch.stack([torch.from_numpy(f).permute(2, 0, 1) for f in frames])
-
-
-def plain_scores(data: TrainDataset, n: int):
-    records: List[ViewRecord] = []
-    counts = {"procedural": 0, "ldi": 0}
-    for s in range(n):
-        sample = data[s]
-        counts[sample.kind] += 1
-        records.extend(score_views(plain_views(sample), sample, s))
-    return {k: summarize_views([r for r in records if r.kind == k], counts[k]) for k in counts}
 
 
 def line(name: str, kind: str, sc: KindScores) -> str:
@@ -71,7 +50,7 @@ def main() -> int:
     print(f"held-out data: {args.data} ({n} samples)")
     print(f"{'render':<44} {'kind':<10} {'views':>5} {'PSNR':>7} {'SSIM':>6} {'PSNRsn':>7} {'SSIMsn':>6} "
           f"{'PSNRun':>7} {'SSIMun':>6}")
-    for name, scores in plain_scores(data, n).items():
+    for name, scores in plain_view_scores(data, n).items():
         if scores is not None:
             print(line("plain point render (reference)", name, scores))
     for path in args.models:

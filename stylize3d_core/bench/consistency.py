@@ -23,6 +23,7 @@ from typing import Callable, Dict, List, Optional
 import numpy as np
 import torch
 
+from ..eval.quality import sharpness  # noqa: F401 (also this module's public name, as before)
 from .report import write_table
 
 Log = Callable[[str], None]
@@ -42,14 +43,6 @@ class ConsistencyPreset:
 
 QUICK = ConsistencyPreset(photo_size=96, frame_size=64, trajectory_frames=90, frames=9)
 FULL = ConsistencyPreset(photo_size=512, frame_size=256, trajectory_frames=90, frames=30)
-
-
-def sharpness(rgb: np.ndarray) -> float:
-    """Standard deviation of the Laplacian of the grey image (H, W, 3) in [0, 1]."""
-    import cv2
-
-    grey = cv2.cvtColor(np.ascontiguousarray(rgb, dtype=np.float32), cv2.COLOR_RGB2GRAY)
-    return float(cv2.Laplacian(grey, cv2.CV_32F).std())
 
 
 def run_consistency(out: Path, quick: bool = False, show_progress: bool = False, log: Log = _quiet,

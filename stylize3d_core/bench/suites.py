@@ -51,8 +51,12 @@ def run_stress(out: Path, quick: bool = False, show_progress: bool = False, log:
 
 
 def run_suite(name: str, out, quick: bool = False, show_progress: bool = False, log: Log = _quiet,
-              photo: Optional[str] = None, style: Optional[str] = None) -> List[dict]:
-    """Run the suite ``name`` (speed, consistency, scaling, stress, skips) and write its tables to ``out``."""
+              photo: Optional[str] = None, style: Optional[str] = None, model: Optional[str] = None,
+              eval_data: Optional[str] = None) -> List[dict]:
+    """Run the suite ``name`` (speed, consistency, scaling, stress, skips, quality) and write its tables to ``out``.
+
+    ``model`` and ``eval_data`` are used by ``quality`` only (the checkpoint measured, default the shipped
+    one; a held-out dataset folder for the stage-1 PSNR / SSIM)."""
     from ..errors import InputError
 
     if name == "stress":
@@ -70,4 +74,8 @@ def run_suite(name: str, out, quick: bool = False, show_progress: bool = False, 
         from .scaling import run_scaling
 
         return run_scaling(Path(out), quick, show_progress, log, photo=photo)
-    raise InputError("suite", f"must be one of speed, consistency, scaling, stress, skips; got {name!r}")
+    if name == "quality":
+        from .quality import run_quality
+
+        return run_quality(Path(out), quick, show_progress, log, model=model, eval_data=eval_data)
+    raise InputError("suite", f"must be one of speed, consistency, scaling, stress, skips, quality; got {name!r}")
