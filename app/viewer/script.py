@@ -390,8 +390,8 @@ class ScriptRunner:
             self.main(lambda: w.applications.dialog_ok())
         if save_as is not None:
             def type_and_save() -> None:
-                w.save_as_edit.text_value = save_as
-                w._save_as_ok()
+                w.path_edit.text_value = save_as
+                w._path_ok()
 
             self.main(type_and_save)
         if wait:
