@@ -50,7 +50,7 @@ class ViewRenderer(Protocol):
 class LayerSettings:
     """A foreground that layered stylization keeps unstylized (``stylize3d_core/export/layered.py``)."""
 
-    mask: Optional[str] = option(None, metavar="IMAGE",
+    mask: Optional[str] = option(None, metavar="IMAGE|person",
                                  help="foreground mask (PNG, the photo's size; white = keep the photo's colours): "
                                       "only the background is stylized. 'person': find the people "
                                       "automatically (MediaPipe selfie segmentation, offline).")
