@@ -174,7 +174,8 @@ def check_outputs(job: RenderJob) -> None:
         _check_destination(job.save_camera_path, "a camera-path file", (".json",))
     if job.exports.save_trajectory is not None:
         _check_destination(job.exports.save_trajectory, "an Open3D trajectory file", (".json",))
-    inputs = [p for p in (job.spec.photo, job.camera_path, job.style, job.layers.mask, job.views) if p is not None]
+    inputs = [p for p in (job.spec.photo, job.camera_path, job.style, job.layers.mask_file, job.views)
+              if p is not None]
     outputs = [p for p in (job.output, job.save_ply, job.save_camera_path, job.exports.save_trajectory)
                if p is not None]
     seen: Dict[Path, str] = {}

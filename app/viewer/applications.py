@@ -5,7 +5,8 @@
   merged into one 3D photo in the frame of the view the user picks.
 * **Stereo cards**: a scanned card, parallel or cross-eyed (depth ``stereo:card``
   / ``stereo:card:cross``), browsed as the photo of its left print.
-* **Layered stylization** (Sec. 4.5): a foreground mask from a file or GrabCut in
+* **Layered stylization** (Sec. 4.5): a foreground mask from a file, the automatic
+  person segmentation (``scene.masks.person_mask``) or GrabCut in
   a rectangle (sliders as fractions of the photo), kept at its own strength (0: the
   original colours); the session renders through :class:`~app.viewer.layers.ViewerLayers`.
 * **Exports**: baked-colour PLY, 3D Gaussian splat ``.ply``, side-by-side (full
@@ -38,7 +39,7 @@ from stylize3d_core.export.run import export_frames, export_points
 from stylize3d_core.export.settings import ExportSettings
 from stylize3d_core.geometry.camera import Cameras
 from stylize3d_core.render.plain import frame_size
-from stylize3d_core.scene.masks import grabcut_mask, load_mask_file
+from stylize3d_core.scene.masks import check_mask, grabcut_mask, load_mask_file, person_mask
 from stylize3d_core.scene.photo3d import Photo3DSettings
 
 from .actions import JSON_FILTERS, Controller, ui_callback
@@ -49,9 +50,10 @@ if TYPE_CHECKING:
     from .session import ViewerSession
     from .window import ViewerWindow
 
-(MENU_VIEWS, MENU_CARD, MENU_CARD_CROSS, MENU_MASK_FILE, MENU_GRABCUT, MENU_FG_STRENGTH, MENU_MASK_CLEAR,
- MENU_PLY, MENU_SPLAT, MENU_SBS, MENU_ANAGLYPH, MENU_LOOP, MENU_PATH_JSON, MENU_PATH_OPEN3D,
- MENU_PATH_LOAD) = range(101, 116)
+(MENU_VIEWS, MENU_CARD, MENU_CARD_CROSS, MENU_MASK_FILE, MENU_GRABCUT, MENU_PERSON, MENU_FG_STRENGTH,
+ MENU_MASK_CLEAR, MENU_PLY, MENU_SPLAT, MENU_SBS, MENU_ANAGLYPH, MENU_LOOP, MENU_PATH_JSON, MENU_PATH_OPEN3D,
+ MENU_PATH_LOAD) = range(301, 317)
+"""Menu ids of the Applications menu: clear of the recent photos' and styles' (100 + i, 200 + i, panel.py)."""
 
 CARD_SPECS = {False: "stereo:card", True: "stereo:card:cross"}
 """Depth specs of a parallel (False) and a cross-eyed (True) stereo card."""
@@ -73,6 +75,7 @@ def build_applications_menu() -> gui.Menu:
     m.add_separator()
     m.add_item("Foreground mask from file...", MENU_MASK_FILE)
     m.add_item("Foreground by GrabCut (rectangle)...", MENU_GRABCUT)
+    m.add_item("Foreground: person (automatic)", MENU_PERSON)
     m.add_item("Foreground strength...", MENU_FG_STRENGTH)
     m.add_item("Clear foreground mask", MENU_MASK_CLEAR)
     m.add_separator()
@@ -142,6 +145,17 @@ def layers_by_grabcut(session: "ViewerSession", fractions: Sequence[float], fore
     rect = rect_pixels(tuple(photo.size), fractions)
     mask = grabcut_mask(photo.rgb, rect, name="GrabCut rectangle")
     session.layers = ViewerLayers(photo, session.info.path, mask, foreground_strength, "GrabCut")
+    return session.layers
+
+
+def layers_by_person(session: "ViewerSession", foreground_strength: float) -> ViewerLayers:
+    """The people in the open photo (the automatic person segmentation) become the session's layers."""
+    photo = _need_photo(session)
+    mask = person_mask(photo.rgb)
+    if not mask.any():
+        raise InputError("person mask", "found no person in the photo; use a mask file or GrabCut")
+    check_mask(mask, "person mask")
+    session.layers = ViewerLayers(photo, session.info.path, mask, foreground_strength, "person segmentation")
     return session.layers
 
 
@@ -251,7 +265,7 @@ class ApplicationsController(Controller):
         return {
             MENU_VIEWS: self.on_open_views, MENU_CARD: lambda: self.on_open_card(False),
             MENU_CARD_CROSS: lambda: self.on_open_card(True), MENU_MASK_FILE: self.on_mask_file,
-            MENU_GRABCUT: self.on_grabcut, MENU_FG_STRENGTH: self.on_foreground_strength,
+            MENU_GRABCUT: self.on_grabcut, MENU_PERSON: self.on_person, MENU_FG_STRENGTH: self.on_foreground_strength,
             MENU_MASK_CLEAR: self.on_clear_mask, MENU_PLY: lambda: self.on_export("ply"),
             MENU_SPLAT: lambda: self.on_export("splat"), MENU_SBS: lambda: self.on_export("sbs"),
             MENU_ANAGLYPH: lambda: self.on_export("anaglyph"), MENU_LOOP: lambda: self.on_export("loop"),
@@ -440,6 +454,20 @@ class ApplicationsController(Controller):
         w.set_busy("GrabCut: finding the foreground ...", 0.3)
         session, fs = w.session, self.foreground_strength
         self.submit("GrabCut", lambda: layers_by_grabcut(session, rect, fs), self._layers_done, key="layers")
+
+    @ui_callback
+    def on_person(self) -> None:
+        if self._require_photo():
+            self.person()
+
+    def person(self) -> None:
+        """Find the people in the photo on the worker; they become the foreground (at the current strength)."""
+        w = self.window
+        if w.state.photo_info is None:
+            raise InputError("photo", "open a photo first")
+        w.set_busy("Person segmentation: finding the people ...", 0.3)
+        session, fs = w.session, self.foreground_strength
+        self.submit("person mask", lambda: layers_by_person(session, fs), self._layers_done, key="layers")
 
     @ui_callback
     def on_foreground_strength(self) -> None:

@@ -1,7 +1,7 @@
 """Layered stylization (paper Sec. 4.5): a foreground keeps its colours while the background is stylized.
 
-The foreground is a mask over the photo (``scene/masks.py``: a file or GrabCut
-in a rectangle) carried by the points of the 3D photo (:func:`~stylize3d_core.scene.masks.point_mask`:
+The foreground is a mask over the photo (``scene/masks.py``: a file, GrabCut
+in a rectangle, or the automatic person segmentation, ``--mask person``) carried by the points of the 3D photo (:func:`~stylize3d_core.scene.masks.point_mask`:
 the hidden layer behind the foreground is background), so it moves with the
 scene in every view. Each frame is composed in 3D: the foreground mask is
 rasterized as a point feature with the same z-buffer rule as the colours, so
@@ -32,8 +32,12 @@ from ..render.holes import fill_holes
 from ..render.plain import PlainRenderer, PlainRenderSettings
 from ..render.rasterize import RasterSettings
 from ..render.rasterizer import PointRasterizer
-from ..scene.masks import grabcut_mask, load_mask_file, parse_rect, point_mask
+from ..scene.masks import check_mask, grabcut_mask, load_mask_file, parse_rect, person_mask, point_mask
 from ..scene.photo3d import Photo3D
+
+PERSON = "person"
+"""The ``--mask`` value that asks for the automatic person segmentation instead of a file
+(a mask file called ``person`` is given as ``./person``)."""
 
 
 class ViewRenderer(Protocol):
@@ -46,9 +50,10 @@ class ViewRenderer(Protocol):
 class LayerSettings:
     """A foreground that layered stylization keeps unstylized (``stylize3d_core/export/layered.py``)."""
 
-    mask: Optional[str] = option(None, metavar="IMAGE",
+    mask: Optional[str] = option(None, metavar="IMAGE|person",
                                  help="foreground mask (PNG, the photo's size; white = keep the photo's colours): "
-                                      "only the background is stylized.")
+                                      "only the background is stylized. 'person': find the people "
+                                      "automatically (MediaPipe selfie segmentation, offline).")
     mask_rect: Optional[str] = option(None, metavar="X,Y,W,H",
                                       help="find the foreground with GrabCut inside this rectangle (pixels of the "
                                            "photo file) instead of a mask file.")
@@ -69,9 +74,19 @@ class LayerSettings:
     def active(self) -> bool:
         return self.mask is not None or self.mask_rect is not None
 
+    @property
+    def mask_file(self) -> Optional[str]:
+        """The mask file, or None (no mask, a GrabCut rectangle or ``--mask person``)."""
+        return None if self.mask == PERSON else self.mask
+
 
 def photo_mask(settings: LayerSettings, photo: Photo3D, file_size: Tuple[int, int]) -> np.ndarray:
     """The foreground (H, W) bool of the photo ``settings`` asks for; ``file_size`` is the photo file's (H, W)."""
+    if settings.mask == PERSON:
+        mask = person_mask(photo.rgb)
+        if not mask.any():
+            raise InputError("mask", "--mask person found no person in the photo; give a mask file or --mask-rect")
+        return check_mask(mask, "--mask person")
     if settings.mask is not None:
         return load_mask_file(settings.mask, photo.size, file_size)
     if settings.mask_rect is None:

@@ -11,7 +11,14 @@ from
   nearest neighbour) or the size the photo was loaded at; anything else is an
   :class:`InputError` naming the mask file and both sizes;
 * OpenCV's GrabCut seeded by a rectangle around the foreground
-  (:func:`grabcut_mask`), always available.
+  (:func:`grabcut_mask`), always available;
+* an automatic person segmentation (:func:`person_mask`): MediaPipe's selfie
+  segmentation network (Apache-2.0), converted once to ONNX by
+  ``tools/convert_selfie_segmentation.py`` and shipped as
+  ``assets/model/selfie_segmentation.onnx``; run with onnxruntime, offline.
+  It is a selfie model: it finds people (best when they fill much of the
+  frame) but also marks other large salient foreground objects (a cat's face,
+  a cup seen close up) as foreground.
 
 The mask follows the layered depth image (:func:`point_mask`): a layer-0 point
 is foreground where the mask is, border points are background, and the hidden
@@ -22,6 +29,7 @@ moving camera uncovers it.
 
 from __future__ import annotations
 
+import functools
 from typing import Tuple
 
 import cv2
@@ -30,10 +38,17 @@ from PIL import Image, UnidentifiedImageError
 
 from ..errors import InputError, PathLike
 from ..io.images import to_uint8
+from ..resources import _checkout_assets, shipped_location
 from .ldi import LDI
 
 GRABCUT_ITERATIONS = 5
 """Iterations of ``cv2.grabCut``."""
+PERSON_MODEL = "model/selfie_segmentation.onnx"
+"""The person segmentation network inside the shipped data (``stylize3d_assets``)."""
+PERSON_THRESHOLD = 0.5
+"""A pixel is a person where the network's probability is at least this."""
+PERSON_MIN_SIDE = 16
+"""The smallest photo side (pixels) :func:`person_mask` accepts."""
 
 
 def _size_text(hw: Tuple[int, int]) -> str:
@@ -129,3 +144,74 @@ def point_mask(ldi: LDI, mask: np.ndarray) -> np.ndarray:
     canvas[ldi.photo_region] = mask
     hidden = np.zeros(int(ldi.hidden_mask.sum()), bool)
     return np.concatenate([canvas.ravel(), hidden])
+
+
+@functools.lru_cache(maxsize=1)
+def _person_session():
+    """The onnxruntime session of the shipped person network (loaded once per process).
+
+    When the installed data lacks the file (an editable install of an older checkout), this source
+    checkout's ``assets/`` is tried, as :func:`~stylize3d_core.resources.assets_location` does.
+    """
+    import onnxruntime as ort  # imported here: the other mask sources do not need it
+
+    path = shipped_location(PERSON_MODEL)
+    checkout = _checkout_assets()
+    if not path.is_file() and checkout is not None and (checkout / PERSON_MODEL).is_file():
+        path = checkout / PERSON_MODEL
+    if not path.is_file():
+        raise InputError(path, "the person segmentation model is not installed; reinstall stylize3d")
+    options = ort.SessionOptions()
+    options.log_severity_level = 3
+    try:
+        return ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+    except Exception as exc:  # onnxruntime raises its own exception types for a damaged file
+        raise InputError(path, f"cannot load the person segmentation model: {exc}") from None
+
+
+def person_probability(rgb: np.ndarray, name: str = "photo") -> np.ndarray:
+    """(H, W) float32 in [0, 1]: the network's probability that each pixel of ``rgb`` is a person.
+
+    ``rgb`` is (H, W, 3) (or (H, W) grey), float in [0, 1] or uint8; it is stretched to the network's
+    input (256 x 256, as MediaPipe feeds it) and the output is resized back bilinearly.
+    """
+    image = np.asarray(rgb)
+    if image.ndim == 2:
+        image = np.repeat(image[..., None], 3, axis=2)
+    if image.ndim != 3 or image.shape[2] != 3:
+        raise InputError(name, f"expected an (H, W, 3) RGB image or an (H, W) grey one, got shape {image.shape}")
+    h, w = image.shape[:2]
+    if min(h, w) < PERSON_MIN_SIDE:
+        raise InputError(name, f"is {w}x{h} pixels: too small to find a person in "
+                               f"(at least {PERSON_MIN_SIDE} pixels a side)")
+    if image.dtype == np.uint8:
+        image = image.astype(np.float32) / 255.0
+    else:
+        image = image.astype(np.float32)
+        if not np.isfinite(image).all():
+            raise InputError(name, "has NaN or infinite pixel values")
+        image = np.clip(image, 0.0, 1.0)
+    session = _person_session()
+    inp = session.get_inputs()[0]
+    net_h, net_w = int(inp.shape[1]), int(inp.shape[2])
+    shrink = h > net_h or w > net_w
+    x = cv2.resize(image, (net_w, net_h), interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
+    prob = session.run(None, {inp.name: x[None]})[0][0, :, :, 0]
+    prob = cv2.resize(prob, (w, h), interpolation=cv2.INTER_LINEAR)
+    return np.clip(prob, 0.0, 1.0)
+
+
+def person_mask(rgb: np.ndarray, name: str = "photo") -> np.ndarray:
+    """The people in ``rgb`` as (H, W) bool (see :func:`person_probability` for the input).
+
+    The probability is thresholded at :data:`PERSON_THRESHOLD`, then cleaned with a morphological
+    opening (drops specks) and closing (fills pinholes) of about 1 % of the photo's shorter side.
+    May be all False (nobody found): :func:`check_mask` turns that into an error where a mask is needed.
+    """
+    mask = person_probability(rgb, name) >= PERSON_THRESHOLD
+    side = min(mask.shape)
+    k = max(3, int(round(side * 0.01)) | 1)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))
+    m = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, kernel)
+    m = cv2.morphologyEx(m, cv2.MORPH_CLOSE, kernel)
+    return m.astype(bool)
