@@ -100,7 +100,8 @@ def test_the_wheel_carries_every_package_the_model_samples_and_styles(built):
     for top in ("stylize3d", "stylize3d_core", "app"):
         for init in (REPO / top).rglob("__init__.py"):
             assert init.relative_to(REPO).as_posix() in names, f"{init.parent} is missing from pyproject's packages"
-    for name in ("model/stylize3d_lite.safetensors", "model/README.md", "samples/coffee.jpg",
+    for name in ("model/stylize3d_lite.safetensors", "model/selfie_segmentation.onnx", "model/LICENSE-mediapipe.txt",
+                 "model/README.md", "samples/coffee.jpg",
                  "styles/painting_style19_chelsea.jpg", "styles/README.md"):
         assert f"stylize3d_assets/{name}" in names
     assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names)

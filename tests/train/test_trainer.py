@@ -82,7 +82,7 @@ def test_training_style_features_are_the_style_encoders(data):
     step.model.stylizer.stylize = lambda content, maps: seen.append(maps) or stylize(content, maps)
     style = torch.rand(3, 40, 48, generator=torch.Generator().manual_seed(0))  # short side < 64: upscaled
     terms = step(sample, style, torch.Generator().manual_seed(0))
-    assert {"content", "style", "consistency"} == set(terms)
+    assert {"content", "style", "colour", "consistency"} == set(terms)  # no teacher given: no teacher terms
     with torch.no_grad():
         expected = StyleEncoder(extractor=features)(style[None])
     assert expected.size == (64, 77)
