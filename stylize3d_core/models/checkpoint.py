@@ -8,8 +8,8 @@ A checkpoint is one ``.safetensors`` file. Its metadata holds::
     stage    "1" (view synthesis) or "2" (stylization)
     info     free JSON: iterations, data, command, hours...
 
-Version "3" files have no colour transform (``decoder.transform_channels`` 0;
-added in version 4), version "2" files no detail path either
+Version "3" files have no colour transform (``decoder.transform_channels`` 0)
+nor colour transfer (``detail_transfer`` False), both added in version 4, version "2" files no detail path either
 (``detail_channels`` 0; added in version 3). Version "1" files are still read too: their
 config kept the neighbourhood settings (k, radii, down-sampling, FPS start)
 inside ``encoder`` and the subset size as ``encoder_max_points``;
@@ -87,6 +87,7 @@ def config_from_json(text: str, source: PathLike, version: str = VERSION) -> Mod
         return ModelConfig(
             name=d["name"], encoder=enc, neighbourhood=hood, stylizer=sty, raster_channels=int(d["raster_channels"]),
             decoder=dec, detail_channels=int(d.get("detail_channels", 0)),
+            detail_transfer=bool(d.get("detail_transfer", False)),
         )
     except (ValueError, KeyError, TypeError, AttributeError) as e:
         raise InputError(source, f"the checkpoint's model configuration is unreadable ({e})") from None

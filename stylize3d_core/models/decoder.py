@@ -24,9 +24,9 @@ so ``A = I, b = 0`` renders the points' colours exactly (sharp, and consistent
 from view to view by construction), ``A = 0, b = 0`` is the plain U-Net output,
 and in between the decoder recolours the full-resolution detail with a
 locally varying colour transform while it paints texture into ``rgb``. Holes
-(``m = 0``) keep the U-Net's inpainting. The head starts at zero, so adding it
-(:func:`~stylize3d_core.models.stylize3d.add_colour_transform`) leaves a model's
-output unchanged.
+(``m = 0``) keep the U-Net's inpainting. A new decoder starts at the identity;
+:func:`~stylize3d_core.models.stylize3d.add_colour_transform` can also add a zero
+head to a trained model, leaving its output unchanged.
 
 The full-resolution layers are narrow (``width / 4`` channels for 2 levels);
 the ``width``-channel layers run at 1/2 and 1/4 resolution.
@@ -76,6 +76,10 @@ class DecoderConfig:
         channels_last: keep weights/activations in NHWC (faster on CPU). Default True.
         transform_channels: 0, or 3: the last 3 feature channels are RGB colours that the
             colour-transform head recolours (see the module docstring). Default 0.
+        transform_gain: the head sees its input scaled by this: with Adam, whose steps are about
+            the learning rate per weight whatever the gradient, a gain of 1 / width keeps each step's
+            change of the colour matrix near the learning rate instead of ``width`` times it (the
+            presets use 1 / width; 1.0 is the layout of the first checkpoints with the transform).
     """
 
     in_channels: int = 256
@@ -85,8 +89,11 @@ class DecoderConfig:
     supersample: bool = False
     channels_last: bool = True
     transform_channels: int = 0
+    transform_gain: float = 1.0
 
     def __post_init__(self) -> None:
+        if not 0.0 < self.transform_gain <= 1.0:
+            raise InputError("DecoderConfig.transform_gain", f"must be in (0, 1], got {self.transform_gain!r}")
         if self.transform_channels not in (0, 3):
             raise InputError("DecoderConfig.transform_channels", f"must be 0 or 3, got {self.transform_channels!r}")
         if self.transform_channels and self.in_channels <= self.transform_channels:
@@ -107,7 +114,7 @@ class DecoderConfig:
     def paper(cls, in_channels: int = 256, supersample: bool = False, transform_channels: int = 0) -> "DecoderConfig":
         """The public code's decoder: width 256, 2 levels (seconds per 512^2 frame on a CPU)."""
         return cls(in_channels=in_channels, width=256, levels=2, supersample=supersample,
-                   transform_channels=transform_channels)
+                   transform_channels=transform_channels, transform_gain=1.0 / 256)
 
     @classmethod
     def lite(cls, in_channels: int = 64, supersample: bool = False, transform_channels: int = 0) -> "DecoderConfig":
@@ -120,7 +127,7 @@ class DecoderConfig:
         width 128 ~340 ms at 512^2 at best (no headroom).
         """
         return cls(in_channels=in_channels, width=96, levels=2, supersample=supersample,
-                   transform_channels=transform_channels)
+                   transform_channels=transform_channels, transform_gain=1.0 / 96)
 
 
 def pad_to_multiple(x: torch.Tensor, multiple: int) -> torch.Tensor:
@@ -140,6 +147,18 @@ def supersample_pool(features: torch.Tensor, mask: torch.Tensor) -> Tuple[torch.
     coverage = F.avg_pool2d(mask, 2)  # (B, 1, H, W)
     summed = F.avg_pool2d(features * mask, 2)  # (B, C, H, W); exactly 0 where coverage is 0
     return summed / coverage.clamp_min(1e-6), coverage
+
+
+IDENTITY_TRANSFORM = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
+"""The colour transform's coefficients (A row by row, then b) that render the colours unchanged."""
+
+
+def identity_transform(head: nn.Conv2d, identity: bool = True) -> None:
+    """Set the transform head to the identity (a new decoder renders the colours it is given) or to zero
+    (``identity`` False: the U-Net's own output)."""
+    with torch.no_grad():
+        head.weight.zero_()
+        head.bias.copy_(torch.tensor(IDENTITY_TRANSFORM) if identity else torch.zeros(12))
 
 
 def apply_colour_transform(rgb: torch.Tensor, colours: torch.Tensor, coverage: torch.Tensor,
@@ -204,8 +223,7 @@ class UNetDecoder(nn.Module):
         self.transform = None
         if config.transform_channels:
             self.transform = nn.Conv2d(w, 12, 1)  # 3 x 3 matrix + offset per pixel, at 1 / 2**levels resolution
-            nn.init.zeros_(self.transform.weight)
-            nn.init.zeros_(self.transform.bias)
+            identity_transform(self.transform)
         if config.channels_last:
             self.to(memory_format=torch.channels_last)
 
@@ -242,5 +260,7 @@ class UNetDecoder(nn.Module):
         rgb = torch.sigmoid(self.out_rgb(x))[..., :h, :w]  # (B, 3, H, W)
         if self.transform is not None:
             padded = (coarse.shape[-2] * 2**self.config.levels, coarse.shape[-1] * 2**self.config.levels)
-            rgb = apply_colour_transform(rgb, colours, mask, self.transform(coarse), padded)
+            gain = self.config.transform_gain
+            coeff = self.transform(coarse * gain if gain != 1.0 else coarse)
+            rgb = apply_colour_transform(rgb, colours, mask, coeff, padded)
         return rgb.contiguous()

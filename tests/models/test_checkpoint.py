@@ -138,7 +138,7 @@ def test_shipped_version_1_checkpoint_loads_with_the_default_neighbourhoods():
     assert meta["version"] == "1" and "neighbourhood" not in json.loads(meta["config"])
     config = load_checkpoint(DEFAULT_MODEL).model.config
     lite = ModelConfig.lite()  # less the detail path (version 3) and its colour transform (version 4)
-    assert config == dataclasses.replace(lite, detail_channels=0,
+    assert config == dataclasses.replace(lite, detail_channels=0, detail_transfer=False,
                                          decoder=dataclasses.replace(lite.decoder, in_channels=32,
-                                                                     transform_channels=0))
+                                                                     transform_channels=0, transform_gain=1.0))
     assert config.neighbourhood == NeighbourhoodConfig()

@@ -9,7 +9,9 @@ from stylize3d_core.errors import InputError
 from stylize3d_core.models.decoder import (
     DecoderConfig,
     UNetDecoder,
+    IDENTITY_TRANSFORM,
     apply_colour_transform,
+    identity_transform,
     pad_to_multiple,
     supersample_pool,
 )
@@ -161,8 +163,11 @@ def test_colour_transform_known_values():
 @pytest.mark.parametrize("supersample,h,w", [(False, 13, 22), (True, 10, 14)])
 def test_colour_transform_head_identity_zero_and_sizes(supersample, h, w):
     torch.manual_seed(1)
-    cfg = DecoderConfig(in_channels=8 + 3, width=16, transform_channels=3, supersample=supersample)
+    cfg = DecoderConfig(in_channels=8 + 3, width=16, transform_channels=3, supersample=supersample,
+                        transform_gain=1.0 / 16)
     dec = UNetDecoder(cfg).eval()
+    assert dec.transform.bias.tolist() == list(IDENTITY_TRANSFORM)  # a new decoder starts at the identity
+    identity_transform(dec.transform, False)
     plain = UNetDecoder(DecoderConfig(in_channels=8 + 3, width=16, supersample=supersample)).eval()
     plain.load_state_dict({k: v for k, v in dec.state_dict().items() if not k.startswith("transform.")})
     s = 2 if supersample else 1
@@ -171,7 +176,7 @@ def test_colour_transform_head_identity_zero_and_sizes(supersample, h, w):
     with torch.no_grad():
         zero = dec(feats, mask)
         torch.testing.assert_close(zero, plain(feats, mask), rtol=0, atol=1e-6)  # zero head: the U-Net
-        dec.transform.bias.copy_(torch.tensor([1., 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0]))
+        identity_transform(dec.transform)
         ident = dec(feats, mask)
     assert ident.shape == (1, 3, h, w)
     if supersample:
@@ -189,4 +194,6 @@ def test_colour_transform_config_checks():
         DecoderConfig(in_channels=8, transform_channels=2)
     with pytest.raises(InputError, match="transform_channels"):
         DecoderConfig(in_channels=3, width=16, transform_channels=3)
-    assert DecoderConfig.lite(in_channels=35, transform_channels=3).transform_channels == 3
+    assert DecoderConfig.lite(in_channels=35, transform_channels=3).transform_gain == pytest.approx(1 / 96)
+    with pytest.raises(InputError, match="transform_gain"):
+        DecoderConfig(in_channels=8, transform_channels=3, transform_gain=0.0)

@@ -22,10 +22,11 @@ TINY = ModelConfig(
     raster_channels=8,
     decoder=DecoderConfig(in_channels=8, width=16),
     detail_channels=0,
+    detail_transfer=False,
 )
 TINY_DETAIL = ModelConfig(
     name="lite", encoder=TINY.encoder, stylizer=TINY.stylizer, raster_channels=8,
-    decoder=DecoderConfig(in_channels=8 + 3, width=16), detail_channels=3,
+    decoder=DecoderConfig(in_channels=8 + 3, width=16), detail_channels=3, detail_transfer=False,
 )
 
 
@@ -158,7 +159,9 @@ def test_config_checks():
     assert ModelConfig.lite().decoder.transform_channels == 3 == ModelConfig.paper().decoder.transform_channels
     with pytest.raises(InputError, match="colour transform"):
         ModelConfig(detail_channels=0, decoder=DecoderConfig.lite(in_channels=32 + 3, transform_channels=3),
-                    raster_channels=35)
+                    raster_channels=35, detail_transfer=False)
+    with pytest.raises(InputError, match="detail_transfer"):
+        ModelConfig(detail_channels=0, decoder=DecoderConfig.lite(in_channels=32), raster_channels=32)
     with pytest.raises(InputError):
         ModelConfig.by_name("huge")
     assert ModelConfig.paper().raster_channels == 256
