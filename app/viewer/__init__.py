@@ -62,6 +62,10 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+GUI_SWITCH_INTERVAL_S = 0.0005
+"""``sys.setswitchinterval`` of the viewer: how long a thread may hold the GIL before another takes it."""
+
+
 def main(argv: Optional[List[str]] = None) -> int:
     """Run the viewer until its window closes; returns the exit status (1 if a test script failed)."""
     args = build_parser().parse_args(argv)
@@ -92,6 +96,10 @@ def main(argv: Optional[List[str]] = None) -> int:
     import torch
 
     torch.set_num_threads(args.threads)
+    # The compute worker runs Python between its torch calls; with the default 5 ms switch interval every
+    # GUI callback (mouse moves, ticks, frames handed over) could wait that long for the GIL, several times per
+    # frame (measured: a busy Python thread cut an Open3D window's image updates from ~48 to ~21 per second).
+    sys.setswitchinterval(GUI_SWITCH_INTERVAL_S)
 
     from .script import ScriptRunner, read_script
     from .window import ViewerOptions, ViewerWindow
