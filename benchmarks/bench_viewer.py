@@ -503,6 +503,9 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=2, help="drag pairs per settings in --interactive (default 2)")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
+    from app.viewer import keep_freed_memory
+
+    keep_freed_memory()  # as the viewer does (its window process does it itself)
     if args.window:
         with tempfile.TemporaryDirectory() as tmp:
             window(args.model or str(DEFAULT_MODEL), args.megapixels, tmp, args.max_size, args.repeats, args.threads,
