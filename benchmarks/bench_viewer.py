@@ -289,55 +289,6 @@ def interactive(model: str, megapixels: float, full_side: int, tmp: str, max_siz
         worker.stop(timeout=10)
 
 
-def _xvfb(screen: Tuple[int, int]):
-    """(process, ":N") of a private Xvfb (it picks a free display number itself), or None without Xvfb."""
-    import select
-    import shutil
-    import subprocess
-
-    xvfb = shutil.which("Xvfb")
-    if xvfb is None:
-        return None
-    r, w = os.pipe()
-    proc = subprocess.Popen([xvfb, "-displayfd", str(w), "-screen", "0", f"{screen[0]}x{screen[1]}x24",
-                             "-nolisten", "tcp"], pass_fds=(w,), stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
-    os.close(w)
-    number, t_end = b"", time.monotonic() + 20
-    while not number.endswith(b"\n") and time.monotonic() < t_end:
-        ready, _, _ = select.select([r], [], [], 0.5)
-        if not ready:
-            continue
-        chunk = os.read(r, 16)
-        if not chunk:
-            break
-        number += chunk
-    os.close(r)
-    if not number.strip().isdigit():
-        proc.kill()
-        proc.wait()
-        return None
-    return proc, f":{int(number)}"
-
-
-def _xtest():
-    """(libX11, libXtst) through ctypes, or None where they are missing."""
-    import ctypes
-    import ctypes.util
-
-    x11, xtst = ctypes.util.find_library("X11"), ctypes.util.find_library("Xtst")
-    if not x11 or not xtst:
-        return None
-    lx, lt = ctypes.CDLL(x11), ctypes.CDLL(xtst)
-    lx.XOpenDisplay.restype = ctypes.c_void_p
-    lx.XOpenDisplay.argtypes = [ctypes.c_char_p]
-    for name in ("XFlush", "XCloseDisplay"):
-        getattr(lx, name).argtypes = [ctypes.c_void_p]
-    lt.XTestFakeMotionEvent.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_ulong]
-    lt.XTestFakeButtonEvent.argtypes = [ctypes.c_void_p, ctypes.c_uint, ctypes.c_int, ctypes.c_ulong]
-    return lx, lt
-
-
 def window_figures(stats: Dict[str, list], drags: List[Tuple[float, float, bool]]) -> Dict[str, List[float]]:
     """The figures of the window run from the viewer's frame log ``stats`` (``ViewerWindow.stats``, times
     in ``time.monotonic()``) and the drags sent ``(mouse-down, mouse-up, second drag of a pair)``."""
@@ -367,9 +318,10 @@ def window(model: str, megapixels: float, tmp: str, max_size: int, repeats: int,
     import numpy as np
 
     from app.viewer.script import run_viewer_process
+    from app.viewer.xserver import start_xvfb, xtest_libs
 
     screen = (1280, 800)
-    libs, server = _xtest(), _xvfb(screen)
+    libs, server = xtest_libs(), start_xvfb(screen)
     if libs is None or server is None:
         print("window: needs Xvfb and libXtst (apt-get install xvfb libxtst6); skipped")
         if server is not None:

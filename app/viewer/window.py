@@ -579,7 +579,7 @@ class ViewerWindow:
             ms = 1000.0 * float(np.median(st["preview_seconds"][-10:]))
             text = f"preview {ms:.0f} ms @ {self._preview_side} px"
         if st["level_seconds"] and st["level_sizes"] and self.scheduler.levels != (1.0,):
-            text += f"; first {max(st['level_sizes'][-1])} px {st['level_seconds'][-1]:.2f} s"
+            text += f"; {max(st['level_sizes'][-1])} px {st['level_seconds'][-1]:.2f} s"
         if st["full_seconds"]:
             text += f"; full {st['full_seconds'][-1]:.2f} s"
         self.panel.fps_label.text = text
