@@ -12,6 +12,22 @@ Layout (as in the paper's public code: 2 levels, no normalisation layers)::
         y = relu(conv3x3([y | skip_i]))
     rgb = sigmoid(conv1x1(relu(conv3x3(y))))      (B, 3, H, W), in (0, 1)
 
+**Colour transform** (``transform_channels`` = 3): the last three input
+feature channels are the points' own colours ``d`` (the model's detail path).
+A 1x1 convolution of the coarsest level ``x_levels`` predicts, per pixel, a
+3 x 3 matrix ``A`` and an offset ``b``, upsampled bilinearly to full resolution
+(a smooth field), and wherever points cover the pixel (coverage ``m``)::
+
+    out = clamp(rgb + m * (A (d - rgb) + b), 0, 1)
+
+so ``A = I, b = 0`` renders the points' colours exactly (sharp, and consistent
+from view to view by construction), ``A = 0, b = 0`` is the plain U-Net output,
+and in between the decoder recolours the full-resolution detail with a
+locally varying colour transform while it paints texture into ``rgb``. Holes
+(``m = 0``) keep the U-Net's inpainting. The head starts at zero, so adding it
+(:func:`~stylize3d_core.models.stylize3d.add_colour_transform`) leaves a model's
+output unchanged.
+
 The full-resolution layers are narrow (``width / 4`` channels for 2 levels);
 the ``width``-channel layers run at 1/2 and 1/4 resolution.
 
@@ -73,6 +89,8 @@ class DecoderConfig:
         supersample: inputs come at (2H, 2W) and are mask-weighted-averaged to
             (H, W) before decoding (see the module docstring). Default False.
         channels_last: keep weights/activations in NHWC (faster on CPU). Default True.
+        transform_channels: 0, or 3: the last 3 feature channels are RGB colours that the
+            colour-transform head recolours (see the module docstring). Default 0.
     """
 
     in_channels: int = 256
@@ -81,8 +99,14 @@ class DecoderConfig:
     negative_slope: float = 0.2
     supersample: bool = False
     channels_last: bool = True
+    transform_channels: int = 0
 
     def __post_init__(self) -> None:
+        if self.transform_channels not in (0, 3):
+            raise InputError("DecoderConfig.transform_channels", f"must be 0 or 3, got {self.transform_channels!r}")
+        if self.transform_channels and self.in_channels <= self.transform_channels:
+            raise InputError("DecoderConfig.transform_channels", f"needs in_channels > {self.transform_channels} "
+                             f"(learned features before the colours), got {self.in_channels}")
         if self.in_channels < 1:
             raise InputError("DecoderConfig.in_channels", f"must be >= 1, got {self.in_channels}")
         if self.levels < 1:
@@ -95,12 +119,13 @@ class DecoderConfig:
             raise InputError("DecoderConfig.negative_slope", f"must be in [0, 1), got {self.negative_slope}")
 
     @classmethod
-    def paper(cls, in_channels: int = 256, supersample: bool = False) -> "DecoderConfig":
+    def paper(cls, in_channels: int = 256, supersample: bool = False, transform_channels: int = 0) -> "DecoderConfig":
         """The public code's decoder: width 256, 2 levels (seconds per 512^2 frame on a CPU)."""
-        return cls(in_channels=in_channels, width=256, levels=2, supersample=supersample)
+        return cls(in_channels=in_channels, width=256, levels=2, supersample=supersample,
+                   transform_channels=transform_channels)
 
     @classmethod
-    def lite(cls, in_channels: int = 64, supersample: bool = False) -> "DecoderConfig":
+    def lite(cls, in_channels: int = 64, supersample: bool = False, transform_channels: int = 0) -> "DecoderConfig":
         """CPU decoder for the viewer: width 96 (24 channels at full resolution), 2 levels.
 
         Chosen with ``benchmarks/bench_decoder.py`` (C_in = 64, widths 64/96/128/192,
@@ -109,7 +134,8 @@ class DecoderConfig:
         width 96 took ~230-290 ms at 512^2 and ~37-52 ms at 256^2 in quiet runs,
         width 128 ~340 ms at 512^2 at best (no headroom).
         """
-        return cls(in_channels=in_channels, width=96, levels=2, supersample=supersample)
+        return cls(in_channels=in_channels, width=96, levels=2, supersample=supersample,
+                   transform_channels=transform_channels)
 
 
 def pad_to_multiple(x: torch.Tensor, multiple: int) -> torch.Tensor:
@@ -238,6 +264,22 @@ def _assemble(features: torch.Tensor, mask: torch.Tensor, multiple: int, channel
     return x
 
 
+def apply_colour_transform(rgb: torch.Tensor, colours: torch.Tensor, coverage: torch.Tensor,
+                           coefficients: torch.Tensor, padded: Tuple[int, int]) -> torch.Tensor:
+    """``clamp(rgb + m (A (d - rgb) + b), 0, 1)`` (see the module docstring).
+
+    rgb, colours ``d``: (B, 3, H, W); coverage ``m``: (B, 1, H, W); coefficients:
+    (B, 12, h', w') over the zero-padded frame of size ``padded`` (rows of ``A``
+    first, then ``b``): upsampled bilinearly to ``padded``, then cropped to (H, W).
+    """
+    b, _, h, w = rgb.shape
+    full = F.interpolate(coefficients, size=padded, mode="bilinear", align_corners=False)[..., :h, :w]
+    a = full[:, :9].reshape(b, 3, 3, h, w)
+    delta = colours.to(rgb.dtype) - rgb  # (B, 3, H, W)
+    mixed = torch.einsum("bijhw,bjhw->bihw", a, delta) + full[:, 9:]
+    return (rgb + coverage * mixed).clamp(0.0, 1.0)
+
+
 class _Down(nn.Module):
     def __init__(self, c_in: int, c_out: int, slope: float) -> None:
         super().__init__()
@@ -286,6 +328,11 @@ class UNetDecoder(nn.Module):
         self.ups = nn.ModuleList([_Up(2 * skip_ch[i], skip_ch[i]) for i in range(n)])
         self.out_conv = nn.Conv2d(skip_ch[0], skip_ch[0], 3, padding=1)
         self.out_rgb = nn.Conv2d(skip_ch[0], 3, 1)
+        self.transform = None
+        if config.transform_channels:
+            self.transform = nn.Conv2d(w, 12, 1)  # 3 x 3 matrix + offset per pixel, at 1 / 2**levels resolution
+            nn.init.zeros_(self.transform.weight)
+            nn.init.zeros_(self.transform.bias)
         if config.channels_last:
             self.to(memory_format=torch.channels_last)
 
@@ -308,13 +355,20 @@ class UNetDecoder(nn.Module):
         if self.config.supersample:
             features, mask = supersample_pool(features, mask)
         h, w = features.shape[-2:]
+        colours = features[:, features.shape[1] - self.config.transform_channels:]
         x = _assemble(features, mask, 2**self.config.levels, self.config.channels_last, should_stop)  # (B, C_in+1, Hp, Wp)
         skips: List[torch.Tensor] = []
         for skip, down in zip(self.skips, self.downs):
             skips.append(_layer(skip, x, should_stop))
             x = down(x, should_stop)
+        coarse = x  # (B, width, Hp / 2**levels, Wp / 2**levels)
         for i in reversed(range(self.config.levels)):
             x = self.ups[i](x, skips[i], should_stop)
         x = _layer(self.out_conv, x, should_stop, F.relu)
-        rgb = torch.sigmoid(_layer(self.out_rgb, x, should_stop))  # (B, 3, Hp, Wp)
-        return rgb[..., :h, :w].contiguous()
+        rgb = torch.sigmoid(_layer(self.out_rgb, x, should_stop))[..., :h, :w]  # (B, 3, H, W)
+        if self.transform is not None:
+            padded = (coarse.shape[-2] * 2**self.config.levels, coarse.shape[-1] * 2**self.config.levels)
+            coefficients = _layer(self.transform, coarse, should_stop)
+            _stop(should_stop)
+            rgb = apply_colour_transform(rgb, colours, mask, coefficients, padded)
+        return rgb.contiguous()

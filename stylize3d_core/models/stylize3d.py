@@ -18,6 +18,14 @@ style comes from the stylized features. D = 0 is the paper's layout (and that of
 checkpoints written before the detail path; :func:`add_detail_path` widens such a
 model without changing its output).
 
+**Colour transform** (``decoder.transform_channels`` = 3, the default with the
+detail path): the decoder does not only see the points' colours, it recolours
+them: a smooth per-pixel 3 x 3 colour matrix and offset predicted from its
+coarsest level map the rasterized colours towards the style, and its own
+output fills holes and adds texture (see :mod:`.decoder`). Sharpness and
+view-to-view consistency then come from the points themselves. Models without
+it get it from :func:`add_colour_transform` (a zero head: same output).
+
 The projection to ``raster_channels`` happens before the IDW upsampling: both
 are linear and the IDW weights sum to one, so the order does not change the
 result, and projecting the M sparse points is 16x cheaper than the N dense ones.
@@ -77,7 +85,8 @@ class ModelConfig:
     stylizer: AdaAttNConfig = field(default_factory=lambda: AdaAttNConfig(
         content_channels=128, hidden=128, value_channels=128, qk_channels=64))
     raster_channels: int = 32
-    decoder: DecoderConfig = field(default_factory=lambda: DecoderConfig.lite(in_channels=32 + 3))
+    decoder: DecoderConfig = field(default_factory=lambda: DecoderConfig.lite(in_channels=32 + 3,
+                                                                              transform_channels=3))
     detail_channels: int = 3
 
     def __post_init__(self) -> None:
@@ -96,22 +105,27 @@ class ModelConfig:
         if self.decoder.in_channels != self.raster_channels + self.detail_channels:
             raise InputError("ModelConfig", f"decoder in_channels {self.decoder.in_channels} != "
                              f"raster_channels {self.raster_channels} + detail_channels {self.detail_channels}")
+        if self.decoder.transform_channels not in (0, self.detail_channels):
+            raise InputError("ModelConfig", f"the decoder's colour transform recolours the detail path's "
+                             f"{self.detail_channels} channels; got transform_channels "
+                             f"{self.decoder.transform_channels}")
         if self.decoder.supersample:
             raise InputError("ModelConfig", "supersampling is done by the rasterizer; keep decoder.supersample False")
 
     @classmethod
     def lite(cls) -> "ModelConfig":
         """CPU configuration: encoder 32/64/128, AdaAttN 128 (q/k 64), 32 raster channels + the RGB detail
-        path, decoder width 96."""
+        path and its colour transform, decoder width 96."""
         return cls()
 
     @classmethod
     def paper(cls) -> "ModelConfig":
         """The public code's widths: encoder 64/128/256, AdaAttN 256, 256 raster channels + the RGB
-        detail path, decoder 256."""
+        detail path and its colour transform, decoder 256."""
         return cls(
             name="paper", encoder=EncoderConfig.paper(), stylizer=AdaAttNConfig.paper(),
-            raster_channels=256, decoder=DecoderConfig.paper(in_channels=256 + 3), detail_channels=3,
+            raster_channels=256, decoder=DecoderConfig.paper(in_channels=256 + 3, transform_channels=3),
+            detail_channels=3,
         )
 
     @classmethod
@@ -207,11 +221,30 @@ def add_detail_path(model: Stylize3DModel) -> Stylize3DModel:
     return wide
 
 
+def add_colour_transform(model: Stylize3DModel) -> Stylize3DModel:
+    """A copy of a model with the detail path but no colour transform, with a zero transform head added.
+
+    The output is unchanged until training moves the head (see :mod:`.decoder`).
+    """
+    cfg = model.config
+    if not cfg.detail_channels:
+        raise InputError("model", "has no detail path to recolour: add_detail_path first")
+    if cfg.decoder.transform_channels:
+        raise InputError("model", "already has the colour transform")
+    new_cfg = replace(cfg, decoder=replace(cfg.decoder, transform_channels=cfg.detail_channels))
+    wide = Stylize3DModel(new_cfg)
+    missing, unexpected = wide.load_state_dict(model.state_dict(), strict=False)
+    if unexpected or any(not k.startswith("decoder.transform.") for k in missing):
+        raise InputError("model", f"unexpected weights when adding the colour transform: {missing} {unexpected}")
+    wide.train(model.training)
+    return wide
+
+
 def count_parameters(module: nn.Module) -> int:
     """Number of trainable parameters."""
     return sum(p.numel() for p in module.parameters() if p.requires_grad)
 
 
 __all__ = [
-    "DETAIL_CHANNELS", "add_detail_path", "ModelConfig", "NeighbourhoodConfig", "SceneGeometry", "prepare_geometry", "Stylize3DModel", "count_parameters",
+    "DETAIL_CHANNELS", "add_colour_transform", "add_detail_path", "ModelConfig", "NeighbourhoodConfig", "SceneGeometry", "prepare_geometry", "Stylize3DModel", "count_parameters",
 ]

@@ -50,7 +50,7 @@ from ..models.checkpoint import load_checkpoint, save_checkpoint
 from ..models.efficientnet_lite import EfficientNetLiteFeatures
 from ..models.losses import PerceptualLoss, PerceptualLossConfig, StylizationLoss, colour_statistics_loss
 from ..models.style_features import StyleEncoder
-from ..models.stylize3d import ConfigName, ModelConfig, Stylize3DModel, add_detail_path
+from ..models.stylize3d import ConfigName, ModelConfig, Stylize3DModel, add_colour_transform, add_detail_path
 from ..render.reproject import pairwise_consistency, sample_view
 from .cache import TrainDataset
 from .data import TrainSample
@@ -298,6 +298,10 @@ def train(config: TrainConfig, log: Log = print) -> Path:
     if state is None and not model.config.detail_channels and ModelConfig.by_name(config.model).detail_channels:
         model = add_detail_path(model)
         log("added the detail path to the initial model (zero weights: same output)")
+    if (state is None and model.config.detail_channels and not model.config.decoder.transform_channels
+            and ModelConfig.by_name(config.model).decoder.transform_channels):
+        model = add_colour_transform(model)
+        log("added the colour transform to the initial model (zero head: same output)")
     if state is None and config.init_stylizer is not None:
         donor = load_checkpoint(config.init_stylizer).model
         if donor.config.stylizer != model.config.stylizer or donor.config.encoder != model.config.encoder:

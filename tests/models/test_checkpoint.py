@@ -123,8 +123,8 @@ def test_version_1_layout_is_mapped_to_the_neighbourhood_config(tmp_path):
     _with_metadata(good, bad, version="1")
     with pytest.raises(InputError, match="mixed.safetensors.*configuration is unreadable"):
         load_checkpoint(bad)
-    _with_metadata(good, bad, version="4")
-    with pytest.raises(InputError, match="version .4. is not supported"):
+    _with_metadata(good, bad, version="5")
+    with pytest.raises(InputError, match="version .5. is not supported"):
         load_checkpoint(bad)
 
 
@@ -137,7 +137,8 @@ def test_shipped_version_1_checkpoint_loads_with_the_default_neighbourhoods():
         meta = f.metadata()
     assert meta["version"] == "1" and "neighbourhood" not in json.loads(meta["config"])
     config = load_checkpoint(DEFAULT_MODEL).model.config
-    lite = ModelConfig.lite()  # less the detail path, which came with version 3
+    lite = ModelConfig.lite()  # less the detail path (version 3) and its colour transform (version 4)
     assert config == dataclasses.replace(lite, detail_channels=0,
-                                         decoder=dataclasses.replace(lite.decoder, in_channels=32))
+                                         decoder=dataclasses.replace(lite.decoder, in_channels=32,
+                                                                     transform_channels=0))
     assert config.neighbourhood == NeighbourhoodConfig()

@@ -108,6 +108,25 @@ def test_stoppable_forward_equals_the_plain_forward(small_strips, config, hw):
         assert stop.calls > 50  # many strips, one check each
 
 
+def test_stoppable_forward_with_the_colour_transform_head(small_strips):
+    torch.manual_seed(0)
+    dec = UNetDecoder(DecoderConfig.lite(in_channels=16, transform_channels=3)).eval()
+    with torch.no_grad():  # a head that does something (it starts at zero)
+        dec.transform.weight.normal_(0.0, 0.05)
+        dec.transform.bias.normal_(0.0, 0.1)
+    g = torch.Generator().manual_seed(3)
+    feats = torch.rand(1, 16, 37, 53, generator=g)
+    mask = (torch.rand(1, 1, 37, 53, generator=g) > 0.2).float()
+    with torch.inference_mode():
+        ref = dec(feats * mask, mask)
+        total = Counter()
+        out = dec(feats * mask, mask, should_stop=total)
+        assert (out - ref).abs().max().item() <= 1e-6
+        last = Counter(total.calls)  # the last check: just before the colour transform
+        with pytest.raises(RenderInterrupted):
+            dec(feats * mask, mask, should_stop=last)
+
+
 def test_should_stop_stops_at_the_check_it_is_true(small_strips):
     torch.manual_seed(0)
     dec = UNetDecoder(DecoderConfig.lite(in_channels=16)).eval()
