@@ -236,7 +236,7 @@ class ViewerWindow:
         self.image.frame = gui.Rect(r.x, r.y, max(1, r.width - pw), r.height)
         p.root.frame = gui.Rect(r.get_right() - pw, r.y, pw, max(1, r.height - sh))
         p.status_box.frame = gui.Rect(r.get_right() - pw, r.get_bottom() - sh, pw, sh)
-        hw, hh = int(min(30 * em, r.width - pw)), int(min(29 * em, r.height))
+        hw, hh = int(min(30 * em, r.width - pw)), int(min(33 * em, r.height))
         p.help.frame = gui.Rect(r.x + (r.width - pw - hw) // 2, r.y + (r.height - hh) // 2, hw, hh)
         self._update_display_size()
 
