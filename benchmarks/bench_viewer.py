@@ -21,7 +21,7 @@ photo size, along an orbit drag of ``--frames`` camera positions:
   frames per second delivered while dragging (what the window would show, less
   its own redraw), the latency from mouse-down to the first new frame (also for
   a second drag started 0.3 s after the first, while the first rest's full frame
-  renders), the time from rest to the first full-quality frame (the half-size
+  renders), the time from rest to the first full-quality frame (the first
   level of a progressive full frame) and to the full-size one, and the colour
   jump between the last preview and the full frame (mean absolute per-channel
   difference of the means, in 8-bit levels, and mean absolute pixel

@@ -28,7 +28,7 @@ once it rests, and any new camera change abandons a full frame in progress.
 **Progressive full frames.** Where a full frame takes long (the U-Net decoder's
 cost grows with the pixel count: ~1.5-2.5 s at 768x512 on a shared 2-core CPU),
 RESTING renders it in *levels* (:attr:`RenderStateMachine.levels`, fractions of
-the full size, e.g. ``(0.5, 1.0)``): the half-size frame through the same
+the full size, e.g. ``(0.25, 1.0)``): the smaller frame through the same
 decoder and every point -- sharp, with the final frame's colours -- in a
 fraction of the time, then the full one. :meth:`RenderStateMachine.shown` says
 when the next level is due; only the last level settles the view, and a change
