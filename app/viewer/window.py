@@ -48,7 +48,7 @@ from .actions import CameraPathController, ExportController, PhotoController, ui
 from .applications import ApplicationsController
 from .orbit import HOME, OrbitLimits, apply_drag, apply_wheel, orbit
 from .session import NO_MODEL, ViewerSession, ViewFrame, colour_jump
-from .render_state import RenderStateMachine, refine_levels
+from .render_state import RenderPhase, RenderStateMachine, refine_levels
 from .state import (
     PREVIEW_SAMPLES, VIEWER_MAX_SIZE, PreviewSettings, ViewState, choose_preview_long_side, clamp_state_pose,
     full_frame_size, resolve_open_path, resolve_typed_path, shows_stylized, view_camera, view_fov, wheel_ticks,
@@ -635,6 +635,9 @@ class ViewerWindow:
             return gui.Widget.EventCallbackResult.CONSUMED
         if e.type == T.BUTTON_UP:
             self._drag = None
+            if self.scheduler.phase is RenderPhase.MOVING and self.state.playback is None and \
+                    not self.worker.render_waiting():  # the release is the rest: the full frame now (not
+                self.request_render(preview=False)  # when the final pose's preview still waits: it goes first)
             return gui.Widget.EventCallbackResult.CONSUMED
         if e.type == T.WHEEL:
             self.wheel(wheel_ticks(e.wheel_dy, self.options.invert_wheel))
