@@ -202,14 +202,15 @@ class Stylize3DModel(nn.Module):
         """Decode one view: (3, H, W) RGB in (0, 1) and the rasterizer's fragments.
 
         For a fast preview pass a subset of the points (see ``Stylized3DPhoto``).
-        ``should_stop`` is checked between the rasterizer's chunks of points (True
-        stops with :class:`~stylize3d_core.errors.RenderInterrupted`).
+        ``should_stop`` is checked between the rasterizer's chunks of points and
+        between the decoder's layers and strips (``UNetDecoder.forward``); True
+        stops with :class:`~stylize3d_core.errors.RenderInterrupted`.
         """
         settings = RasterSettings(height=int(height), width=int(width), supersample=supersample)
         frags = PointRasterizer(settings)(xyz, dense, camera, should_stop=should_stop)
         features = frags.image.unsqueeze(0)  # (1, Cr, H, W)
         mask = (~frags.hole).to(features.dtype)[None, None]  # (1, 1, H, W)
-        rgb = self.decoder(features, mask)[0]  # (3, H, W)
+        rgb = self.decoder(features, mask, should_stop=should_stop)[0]  # (3, H, W)
         return rgb, frags
 
 
