@@ -32,6 +32,9 @@ from ..checks import check_range
 MAX_GAIN = 3.0
 """Largest std ratio applied: a flat photo is not blown up into noise."""
 
+MIN_LIGHTNESS_GAIN = 1.0
+"""Smallest gain of L*: the photo's lightness contrast (its detail) is never reduced."""
+
 _EPS = 1.0
 """Added to the photo's std (L* units of 0-100): a constant channel gets a finite gain."""
 
@@ -92,6 +95,7 @@ class ColourTransfer:
             return self.rgb
         c = self.stats
         ratio = np.clip(np.nan_to_num(style.std / (c.std + _EPS), nan=1.0), 0.0, MAX_GAIN)
+        ratio[0] = max(ratio[0], MIN_LIGHTNESS_GAIN)
         gain = 1.0 + strength * (ratio - 1.0)
         target = c.mean + strength * (np.nan_to_num(style.mean, nan=0.0) - c.mean)
         out = (self._lab - c.mean) * gain.astype(np.float32) + target.astype(np.float32)
