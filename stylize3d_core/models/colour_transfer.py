@@ -10,7 +10,12 @@ colour statistics, once per photo and style, on the points themselves::
 
 per L*, a*, b* channel, with ``mean_c, std_c`` over the photo's points,
 ``mean_s, std_s`` over the style image's pixels and ``s`` the style strength
-(0: the colours are unchanged). Being a per-point recolouring it is the same
+(0: the colours are unchanged). The gain of L* is at least
+:data:`MIN_LIGHTNESS_GAIN` (1): a style with less lightness contrast than the
+photo takes its palette and mean lightness, but the photo keeps its contrast,
+i.e. its detail (measured on the held-out pairs of ``stylize3d bench quality``:
+sharpness 0.57x -> 0.89x the plain render, Lab distance 1.39x -> 1.97x the 2D
+network's, at strength 1 and before any training of the colour transform). Being a per-point recolouring it is the same
 in every view (consistent by construction) and keeps every edge of the photo;
 the learned model adds the style's texture and local colour on top.
 
@@ -35,8 +40,8 @@ MAX_GAIN = 3.0
 MIN_LIGHTNESS_GAIN = 1.0
 """Smallest gain of L*: the photo's lightness contrast (its detail) is never reduced."""
 
-_EPS = 1.0
-"""Added to the photo's std (L* units of 0-100): a constant channel gets a finite gain."""
+_EPS = 1e-3
+"""Added to the photo's std (L* units of 0-100): a constant channel gets a finite gain (then capped)."""
 
 _MAX_STYLE_PIXELS = 1 << 18
 """Style images are subsampled to at most this many pixels for their statistics."""

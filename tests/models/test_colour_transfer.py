@@ -29,12 +29,17 @@ def test_lab_stats_match_opencv_and_accept_images_and_tensors():
 def test_transfer_reaches_the_style_statistics_inside_the_gamut():
     g = np.random.default_rng(1)
     photo = torch.from_numpy((0.3 + 0.4 * g.random((5000, 3))).astype(np.float32))  # mid-tones
-    style_img = (0.35 + 0.3 * g.random((40, 40, 3)) * np.array([1.0, 0.8, 0.6])).astype(np.float32)
+    style_img = (0.2 + 0.6 * g.random((40, 40, 3)) * np.array([1.0, 0.8, 0.6])).astype(np.float32)
     style = lab_stats(style_img)
     out = transfer_colours(photo, style, 1.0)
     got = lab_stats(out.numpy())
     np.testing.assert_allclose(got.mean, style.mean, atol=0.5)
     np.testing.assert_allclose(got.std, style.std, rtol=0.05, atol=0.3)
+    # a style of less lightness contrast takes the photo's mean lightness but keeps its contrast
+    flat_style = lab_stats((0.45 + 0.05 * g.random((40, 40, 3))).astype(np.float32))
+    kept = lab_stats(transfer_colours(photo, flat_style, 1.0).numpy())
+    assert abs(kept.mean[0] - flat_style.mean[0]) < 0.5
+    assert kept.std[0] == pytest.approx(lab_stats(photo.numpy()).std[0], rel=0.05)
     # each point keeps its place in the distribution: the order of lightness is kept
     l_in, l_out = _lab(photo.numpy())[:, 0], _lab(out.numpy())[:, 0]
     assert np.corrcoef(l_in, l_out)[0, 1] > 0.999
@@ -65,7 +70,9 @@ def test_flat_photo_flat_style_and_bad_values_stay_finite():
     assert (spread <= MAX_GAIN * lab_stats(noisy.numpy()).std + 0.1).all()
     const_style = lab_stats(np.full((4, 4, 3), 0.2, np.float32))
     out = transfer_colours(torch.rand(50, 3), const_style)
-    assert torch.isfinite(out).all() and float(out.std(0).max()) < 0.02  # the style's one colour
+    lab_out = lab_stats(out.numpy())
+    assert torch.isfinite(out).all() and (lab_out.std[1:] < 1.0).all()  # the style's one hue (lightness kept)
+    np.testing.assert_allclose(lab_out.mean, const_style.mean, atol=2.5)  # L* clipped at black
     nan_style = LabStats(np.array([np.nan, 0, 0], np.float32), np.array([np.inf, 1, 1], np.float32))
     assert torch.isfinite(transfer_colours(torch.rand(50, 3), nan_style)).all()
     assert transfer_colours(torch.zeros(0, 3), style).shape == (0, 3)
