@@ -23,9 +23,14 @@ still overlap and a magnified surface shows no gaps. With ``k <= 1`` (and
 without sizes) the splat is the bilinear one above, which is the tent with ``k = 1``.
 
 Z-buffer ("bilinear splat among the front-most surface"): per pixel, ``zmin`` is
-the smallest depth among the contributions it receives. Only contributions with
-``z <= zmin * (1 + depth_tolerance)`` are kept, so the points of one surface
-blend while a surface behind it is hidden. The pixel's feature is the weighted
+the smallest depth among the *front-setting* contributions it receives: those
+whose weight is at least ``hole_weight_threshold`` (a tap too faint to show its
+point on its own, such as the ~1e-7 tap a point almost on a pixel centre gives
+its neighbours, must not hide the surface behind it either); a pixel with none
+takes the smallest depth of all it receives. Only contributions with
+``zmin / (1 + depth_tolerance) <= z <= zmin * (1 + depth_tolerance)`` are kept, so
+the points of one surface blend while a surface behind it is hidden (and the
+faint taps of a nearer one are dropped). The pixel's feature is the weighted
 mean of its kept contributions, ``sum(w * f) / sum(w)``. A pixel whose kept
 weight sum is below ``hole_weight_threshold`` is a *hole*: its feature is 0
 (the caller fills holes, e.g. :func:`stylize3d_core.render.holes.fill_holes`).
@@ -42,8 +47,8 @@ mean of the kept contributions of its 2 x 2 sub-pixels (the average pool of
 every point deposits a total weight of 1 at either setting and the hole
 threshold means the same) and its depth the front-most of theirs. The
 splats of neighbouring points lie 2 sub-pixels apart at (2H, 2W), so the
-z-buffer test uses the nearest depth in each sub-pixel's 3 x 3 neighbourhood
-("visibility splatting"): a farther surface cannot show through the gaps of a
+z-buffer test also uses the nearest front-setting depth in each sub-pixel's 3 x 3
+neighbourhood ("visibility splatting"): a farther surface cannot show through the gaps of a
 nearer one, even when the camera magnifies it up to 2x.
 
 Implementation: the z-buffer is a ``scatter_reduce_("amin")`` over the corners
@@ -92,7 +97,8 @@ class RasterSettings:
         height: output image height H in pixels, 1..16384.
         width: output image width W in pixels, 1..16384.
         depth_tolerance: relative depth band of the front surface; a contribution
-            is kept when ``z <= zmin * (1 + depth_tolerance)``. Default 0.02: 2 % of
+            is kept when ``zmin / (1 + depth_tolerance) <= z <= zmin * (1 + depth_tolerance)``
+            (``zmin``: the front, see the module docstring). Default 0.02: 2 % of
             the depth, i.e. ~0.007 scene units at the normalised near depth 1/3, far
             more than the depth step between neighbouring points of one surface and
             far less than the gap at an occlusion edge. In [0, 1].
@@ -105,11 +111,12 @@ class RasterSettings:
         near_clip: points with ``z <= near_clip`` (scene units) are culled.
             Default 1e-3, 1/333 of the normalised near depth 1/3. Finite and > 0.
         soft_edges: False (default): a (sub-)pixel's front depth is the least depth of
-            every contribution it receives. True: only *core* contributions (every
+            the contributions of weight >= ``hole_weight_threshold`` it receives (of all,
+            where it has none), and contributions nearer than the front band are dropped.
+            True: of those, only *core* contributions (every
             bilinear one, and a grown splat's taps of weight >= :data:`CORE_WEIGHT` /
             half-width^2, which it gives to at least the pixel nearest it) set the
-            front, where there is one, and
-            contributions nearer than the front band are dropped: the thin fringe of a
+            front, where there is one: the thin fringe of a
             nearer surface's splats gives way to the surface behind instead of hiding it
             (or, below the hole threshold, leaving a hole), so silhouettes keep their
             size however large the splats grow.
@@ -147,7 +154,9 @@ class Fragments(NamedTuple):
             ``torch.channels_last`` batch (call ``.contiguous()`` for NCHW memory).
         weight: (H, W) kept weight sum, in the features' dtype (it can be > 0,
             though below the threshold, at holes).
-        depth: (H, W) front-most depth, in the features' dtype; ``+inf`` at holes
+        depth: (H, W) front depth (the least over its sub-pixels with supersampling), in the
+            features' dtype: the least depth of the front-setting contributions (see the
+            module docstring), or of all where there are none; ``+inf`` at holes
             (a z-buffer value, not an image: mask it with ``hole`` before use).
         hole: (H, W) bool, True where the kept weight sum is below the threshold.
     """
@@ -266,8 +275,9 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
     Ks = K.detach().to(device=dev, dtype=dtype).clone()
     Ks[:2] *= s  # (3, 3) intrinsics of the sub-pixel raster
     soft = settings.soft_edges
-    zbuf = torch.full((Hs * Ws,), math.inf, dtype=dtype, device=dev)
-    zcore = torch.full((Hs * Ws,), math.inf, dtype=dtype, device=dev) if soft else zbuf
+    zbuf = torch.full((Hs * Ws,), math.inf, dtype=dtype, device=dev)  # least depth of every tap
+    zfront = torch.full((Hs * Ws,), math.inf, dtype=dtype, device=dev)  # least depth of the front-setting taps
+    strong_weight = settings.hole_weight_threshold
 
     chunks: List[Dict[int, tuple]] = []  # per chunk: reach -> (rows, w, ok, q, o, zg, c00)
     survivors = []
@@ -318,23 +328,29 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
             q = torch.where(ok, yi * Ws + xi, 0)  # (T, mg) raster index
             o = yi * W + xi if s == 1 else (yi >> 1) * W + (xi >> 1)  # (T, mg) output pixel of each tap
             zbuf.scatter_reduce_(0, q.reshape(-1), torch.where(ok, zg, math.inf).reshape(-1), reduce="amin")
-            if soft:
-                core = ok & ((w >= CORE_WEIGHT / (hg * hg)) | (hg == 1.0))  # (T, mg): bilinear taps all are
-                zcore.scatter_reduce_(0, q.reshape(-1), torch.where(core, zg, math.inf).reshape(-1), reduce="amin")
+            # Front-setting taps: a tap too faint to show its point on its own (weight below the
+            # hole threshold) must not hide the surface behind it either.
+            sets = ok & (w >= strong_weight)  # (T, mg)
+            if soft:  # and only core taps (bilinear taps all are)
+                sets &= (w >= CORE_WEIGHT / (hg * hg)) | (hg == 1.0)
+            zfront.scatter_reduce_(0, q.reshape(-1), torch.where(sets, zg, math.inf).reshape(-1), reduce="amin")
             rows = idx if sel is None else idx.index_select(0, sel)
             c00 = o[0] if (r == 1 and s == 1) else None  # (mg,) corner 00 = y0 * W + x0, unmasked
             parts[r] = (rows, w, ok, q, o, zg, c00)
         chunks.append(parts)
 
-    front_buf = torch.where(zcore < math.inf, zcore, zbuf) if soft else zbuf
+    # A (sub-)pixel's own front: its front-setting taps' least depth, where it has one, else its
+    # least depth of all (a pixel reached by faint taps alone; it is a hole unless they add up).
+    own = torch.where(zfront < math.inf, zfront, zbuf)  # (Hs * Ws,)
     if s == 2:
         _check_stop(should_stop)
-        # Visibility splatting: a sub-pixel's front is the nearest depth in its 3 x 3
-        # neighbourhood, so a surface behind cannot show through the gaps between
+        # Visibility splatting: a sub-pixel's front is also the nearest front-setting depth in its
+        # 3 x 3 neighbourhood, so a surface behind cannot show through the gaps between
         # the 2 x 2 splats of a front surface (they are 2 sub-pixels apart).
-        near = -F.max_pool2d(-front_buf.view(1, 1, Hs, Ws), 3, stride=1, padding=1).view(-1)  # (Hs * Ws,)
+        near = -F.max_pool2d(-zfront.view(1, 1, Hs, Ws), 3, stride=1, padding=1).view(-1)  # (Hs * Ws,)
+        near = torch.minimum(near, own)
     else:
-        near = front_buf
+        near = own
 
     tested: Dict[int, list] = {}  # reach -> per chunk (rows, pixel, weight, kept, c00), in point order
     for parts in chunks:
@@ -343,8 +359,8 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
         for r, (rows, w, ok, q, o, zg, c00) in parts.items():
             front = near.index_select(0, q.reshape(-1)).view_as(q)  # (T, mg)
             keep = (zg <= front * (1.0 + settings.depth_tolerance)) & ok  # (T, mg)
-            if soft:  # a nearer surface's fringe gives way to the core-set front
-                keep &= zg * (1.0 + settings.depth_tolerance) >= front
+            # a nearer surface's faint taps (or, with soft edges, its fringe) give way to the front
+            keep &= zg * (1.0 + settings.depth_tolerance) >= front
             tested.setdefault(r, []).append((rows, torch.where(keep, o, 0), torch.where(keep, w, 0.0), keep, c00))
 
     # Join the chunks per group (along the points, which keeps them ascending), groups by tap count:
@@ -359,7 +375,7 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
         weight.append(cat1([p[2] for p in pieces], 1).reshape(-1))
         kept.append(cat1([p[3] for p in pieces], 1).reshape(-1))
         entry_point.append(rows.repeat(T))  # tap-major, as the (T, Mg) rows
-    depth = zbuf.view(Hs, Ws)
+    depth = own.view(Hs, Ws)
     if s == 2:
         depth = depth.reshape(H, 2, W, 2).amin(dim=(1, 3))
     taps = tested[next(iter(tested))][0][1].shape[0] if len(tested) == 1 else 0

@@ -123,6 +123,49 @@ def test_zero_weight_corner_does_not_occlude(raster):
     assert frag.weight[3, 2] == 1.0 and torch.allclose(frag.image[:, 3, 2], feats[0])
 
 
+@pytest.mark.parametrize("soft_edges", [False, True])
+@pytest.mark.parametrize("supersample", [1, 2])
+def test_faint_tap_of_a_nearer_point_does_not_hide_the_surface_behind(raster, supersample, soft_edges):
+    """A near point almost on a pixel centre gives the next column a tap of ~1e-5, below the hole
+    threshold: it must neither hide the far surface's own point there nor leave a hole."""
+    K = simple_K()
+    settings = RasterSettings(6, 8, supersample=supersample, soft_edges=soft_edges)
+    # the near point's faint tap lands on column 3 (on its left sub-pixel column at 2x)
+    u_near = 2.5 if supersample == 1 else 2.75
+    for eps, faint in ((1e-5, True), (2e-2, False)):
+        pts, _ = scene(K, [(u_near + eps, 3.5, 1.0), (3.5, 3.5, 2.0), (4.5, 3.5, 2.0)], C=1)
+        feats = torch.tensor([[1.0], [0.0], [0.0]], dtype=F64)  # near 1, far 0
+        frag = raster(pts, feats, K, settings)
+        assert not frag.hole[3, 2] and float(frag.image[0, 3, 2]) == pytest.approx(1.0)
+        assert not frag.hole[3, 3]
+        if faint:  # the far surface shows, and the z-buffer holds its depth
+            assert float(frag.image[0, 3, 3]) == pytest.approx(0.0, abs=1e-3) and float(frag.depth[3, 3]) == 2.0
+        else:  # a tap above the threshold still occludes
+            assert float(frag.image[0, 3, 3]) == pytest.approx(1.0) and float(frag.depth[3, 3]) == 1.0
+        assert_no_nan(frag)
+
+
+@pytest.mark.parametrize("supersample", [1, 2])
+def test_photo_grid_edge_over_a_far_surface_has_no_holes(raster, supersample):
+    """An LDI-like layer: a near half-plane and a far plane, one point per pixel centre (with the
+    rounding jitter of a real projection, 1e-6 px, rightwards on even rows); the column next to the
+    near edge shows the far plane, not a hole."""
+    H, W = 5, 8
+    K = simple_K(H, W)
+    g = torch.Generator().manual_seed(3)
+    specs = [(j + 0.5, i + 0.5, 1.0 if j < 4 else 2.0) for i in range(H) for j in range(W)]
+    pts, _ = scene(K, specs, C=1)
+    jitter = (torch.rand(len(specs), 2, generator=g, dtype=F64) - 0.5) * 2e-6
+    jitter[:, 0] = torch.tensor([1e-6 if i % 2 == 0 else -1e-6 for i in range(H) for _ in range(W)], dtype=F64)
+    pts[:, :2] += jitter * pts[:, 2:] / K[0, 0]
+    feats = torch.tensor([[1.0 if z == 1.0 else 0.0] for _, _, z in specs], dtype=F64)
+    frag = raster(pts, feats, K, RasterSettings(H, W, supersample=supersample))
+    assert not frag.hole.any()
+    assert torch.allclose(frag.image[0, :, :4], torch.ones((), dtype=F64))
+    assert torch.allclose(frag.image[0, :, 4:], torch.zeros((), dtype=F64), atol=1e-3)
+    assert torch.allclose(frag.depth[:, 4:], torch.full((), 2.0, dtype=F64))
+
+
 def test_points_within_depth_tolerance_blend(raster):
     K = simple_K()
     pts, feats = scene(K, [(2.5, 3.5, 1.01), (2.5, 3.5, 1.0), (2.5, 3.5, 1.03)])
