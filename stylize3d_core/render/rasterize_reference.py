@@ -76,11 +76,14 @@ def rasterize_points_reference(
             for j, wx in cols:
                 w = wx * wy
                 if w > 0 and 0 <= i < Hs and 0 <= j < Ws:
-                    received[(i, j)].append((n, w, z, half == 1.0 or w >= CORE_WEIGHT / half**2))
+                    received[(i, j)].append((n, w, z, half == 1.0 or w >= CORE_WEIGHT / half**2, half))
 
     # 2. Z-buffer per sub-pixel, keep the front surface, pool into output pixels.
     A = torch.zeros(H * W, N, dtype=torch.float64)
     wsum = torch.zeros(H * W, dtype=torch.float64)
+    B = torch.zeros(H * W, N, dtype=torch.float64)  # blend_coverage: the surface behind the front
+    wback = torch.zeros(H * W, dtype=torch.float64)
+    cover = torch.zeros(H * W, dtype=torch.float64)
     depth = torch.full((H * W,), math.inf, dtype=torch.float64)
     def sets_front(w, core):
         # a tap too faint to show its point alone (below the hole threshold) does not hide what is
@@ -89,29 +92,39 @@ def rasterize_points_reference(
 
     # the least depth of the front-setting contributions (inf where none), and the own front:
     # that, or the least depth of all where a (sub-)pixel has no front-setting contribution
-    strong = {key: min([z for _, w, z, core in c if sets_front(w, core)] or [math.inf])
+    strong = {key: min([z for _, w, z, core, _ in c if sets_front(w, core)] or [math.inf])
               for key, c in received.items()}
-    own_front = {key: strong[key] if strong[key] < math.inf else min(z for _, _, z, _ in c)
+    own_front = {key: strong[key] if strong[key] < math.inf else min(z for _, _, z, _, _ in c)
                  for key, c in received.items()}
+    tol = 1.0 + settings.depth_tolerance
     for (i, j), contributions in received.items():
         zmin = own_front[(i, j)]
         if s == 2:  # visibility splatting: also the nearest front-setting depth of the 3 x 3 neighbourhood
             zmin = min([zmin] + [strong.get((i + di, j + dj), math.inf) for di in (-1, 0, 1) for dj in (-1, 0, 1)])
         p = (i // s) * W + (j // s)
         depth[p] = min(float(depth[p]), own_front[(i, j)])
-        for n, w, z, _ in contributions:
-            if z * (1.0 + settings.depth_tolerance) < zmin:
+        # blend_coverage: the next surface's front, set by the front-setting taps behind the front band
+        z2 = min([z for _, w, z, core, _ in contributions if z > zmin * tol and sets_front(w, core)] or [math.inf])
+        for n, w, z, _, half in contributions:
+            if z * tol < zmin:
                 continue  # a nearer surface's faint taps (soft edges: its fringe) give way to the front
-            if z <= zmin * (1.0 + settings.depth_tolerance):
+            if z <= zmin * tol:
                 A[p, n] += w
                 wsum[p] += w
+                cover[p] += w * half * half
+            elif settings.blend_coverage and z2 <= z * tol and z <= z2 * tol:
+                B[p, n] += w
+                wback[p] += w
 
-    # 3. Normalise; holes get zero.
+    # 3. Normalise; holes get zero. With blend_coverage, a partly covered front over the surface behind.
     hole = wsum < settings.hole_weight_threshold
     for p in range(H * W):
         if hole[p]:
             A[p] = 0.0
             depth[p] = math.inf
+        elif settings.blend_coverage and wback[p] >= settings.hole_weight_threshold:
+            alpha = min(1.0, float(cover[p]))
+            A[p] = A[p] / wsum[p] * alpha + B[p] / wback[p] * (1.0 - alpha)
         else:
             A[p] /= wsum[p]
     image = (A @ features.double()).T.reshape(C, H, W)

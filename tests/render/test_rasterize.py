@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import pytest
@@ -661,3 +662,73 @@ def test_point_rasterizer_takes_point_size_and_should_stop():
     assert torch.equal(frag.hole, expected.hole)
     with pytest.raises(RenderInterrupted):
         PointRasterizer(settings)(pts, feats, cameras, sizes, should_stop=lambda: True)
+
+
+# ----------------------------------------------------------------------------- coverage blending
+
+
+def test_blend_coverage_antialiases_a_silhouette(raster):
+    """A near point 0.3 px past a pixel boundary covers 0.3 of the next pixel (its bilinear weight):
+    with blend_coverage that pixel shows 0.3 near over 0.7 of the far surface behind; without it,
+    the near surface alone. A pixel with nothing behind shows its front alone either way."""
+    K = simple_K()
+    pts, _ = scene(K, [(2.5 + 0.3, 3.5, 1.0), (3.5, 3.5, 2.0), (3.5, 1.5, 1.0)], C=1)
+    feats = torch.tensor([[1.0], [0.0], [1.0]], dtype=F64)
+    hard = raster(pts, feats, K, RasterSettings(6, 8))
+    soft = raster(pts, feats, K, RasterSettings(6, 8, blend_coverage=True))
+    assert float(hard.image[0, 3, 3]) == pytest.approx(1.0)
+    assert float(soft.image[0, 3, 3]) == pytest.approx(0.3)
+    assert float(soft.image[0, 3, 2]) == pytest.approx(1.0)  # covered 0.7, nothing behind: the front alone
+    assert float(soft.image[0, 1, 3]) == pytest.approx(1.0)  # a lone point
+    for frag in (hard, soft):  # the weight, depth and holes are the front's
+        assert float(frag.weight[3, 3]) == pytest.approx(0.3) and float(frag.depth[3, 3]) == 1.0
+    assert torch.equal(hard.hole, soft.hole)
+
+
+def test_blend_coverage_keeps_a_magnified_surface_opaque(raster):
+    """Grown splats of points 2 px apart (half-width 2) cover their pixels fully: the surface behind
+    does not show through, though each pixel's weight is ~1/4."""
+    K = simple_K(12, 12)
+    front = [(1.0 + 2 * i, 1.0 + 2 * j, 1.0) for i in range(6) for j in range(6)]
+    back = [(0.5 + i, 0.5 + j, 3.0) for i in range(12) for j in range(12)]
+    pts, _ = scene(K, front + back, C=1)
+    feats = torch.cat([torch.ones(len(front), 1), torch.zeros(len(back), 1)]).to(F64)
+    size = footprint(pts, K, torch.tensor([2.0] * len(front) + [1.0] * len(back), dtype=F64))
+    frag = raster(pts, feats, K, RasterSettings(12, 12, blend_coverage=True), point_size=size)
+    inner = (slice(2, 10), slice(2, 10))
+    assert float(frag.weight[inner].mean()) < 0.5
+    assert torch.allclose(frag.image[0][inner], torch.ones((), dtype=F64))
+
+
+@pytest.mark.parametrize("supersample", [1, 2])
+@pytest.mark.parametrize("soft_edges", [False, True])
+@pytest.mark.parametrize("seed", range(2))
+def test_blend_coverage_matches_reference_and_chunks(supersample, soft_edges, seed):
+    H, W = 8, 9
+    pts, feats, K = random_scene(H, W, 90, 3, seed)
+    g = torch.Generator().manual_seed(300 + seed)
+    sizes = footprint(pts, K, 0.5 + 3.0 * torch.rand(pts.shape[0], generator=g, dtype=F64)).nan_to_num(0.01)
+    settings = RasterSettings(H, W, supersample=supersample, soft_edges=soft_edges, blend_coverage=True)
+    blended = 0
+    for size in (None, sizes):
+        feats_a = feats.clone().requires_grad_(True)
+        feats_b = feats.clone().requires_grad_(True)
+        fast = rasterize_points(pts, feats_a, K, settings, point_size=size)
+        ref = rasterize_points_reference(pts, feats_b, K, settings, point_size=size)
+        assert torch.allclose(fast.image, ref.image, atol=1e-12)
+        assert torch.allclose(fast.weight, ref.weight, atol=1e-12)
+        assert torch.equal(fast.depth, ref.depth) and torch.equal(fast.hole, ref.hole)
+        upstream = torch.randn(3, H, W, dtype=F64, generator=g)
+        (fast.image * upstream).sum().backward()
+        (ref.image * upstream).sum().backward()
+        assert torch.allclose(feats_a.grad, feats_b.grad, atol=1e-12)
+        with torch.inference_mode():
+            one = rasterize_points(pts, feats, K, settings, point_size=size)
+            chunked = rasterize_points(pts, feats, K, settings, point_size=size, chunk_points=7,
+                                       should_stop=lambda: False)
+        for a, b in zip(one, chunked):
+            assert torch.equal(a, b)  # to the bit
+        assert torch.allclose(one.image, ref.image, atol=1e-12)
+        plain = rasterize_points(pts, feats, K, dataclasses.replace(settings, blend_coverage=False), point_size=size)
+        blended += int((~torch.isclose(plain.image, fast.image, atol=1e-9)).any(0).sum())
+    assert blended > 0  # some pixels were blended
