@@ -97,6 +97,7 @@ def rasterize_points_reference(
     own_front = {key: strong[key] if strong[key] < math.inf else min(z for _, _, z, _, _ in c)
                  for key, c in received.items()}
     tol = 1.0 + settings.depth_tolerance
+    blend = settings.blend_coverage and s == 1  # supersampling anti-aliases by its sub-pixels instead
     for (i, j), contributions in received.items():
         zmin = own_front[(i, j)]
         if s == 2:  # visibility splatting: also the nearest front-setting depth of the 3 x 3 neighbourhood
@@ -112,7 +113,7 @@ def rasterize_points_reference(
                 A[p, n] += w
                 wsum[p] += w
                 cover[p] += w * half * half
-            elif settings.blend_coverage and z2 <= z * tol and z <= z2 * tol:
+            elif blend and z2 <= z * tol and z <= z2 * tol:
                 B[p, n] += w
                 wback[p] += w
 
@@ -122,7 +123,7 @@ def rasterize_points_reference(
         if hole[p]:
             A[p] = 0.0
             depth[p] = math.inf
-        elif settings.blend_coverage and wback[p] >= settings.hole_weight_threshold:
+        elif blend and wback[p] >= settings.hole_weight_threshold:
             alpha = min(1.0, float(cover[p]))
             A[p] = A[p] / wsum[p] * alpha + B[p] / wback[p] * (1.0 - alpha)
         else:
