@@ -62,8 +62,9 @@ class PlainRenderSettings:
         blend_coverage: True (default): a pixel a nearer surface covers only partly (a
             silhouette) shows it over the surface behind, by the share it covers
             (``RasterSettings.blend_coverage``), so silhouettes are anti-aliased rather than
-            grown by up to a pixel (at ``supersample`` 1; 2 anti-aliases by its sub-pixels
-            instead); False: the front surface alone.
+            grown by up to a pixel (at ``supersample`` 1 with ``grow_splats`` and a
+            :class:`PointCloud`; 2 anti-aliases by its sub-pixels instead); False: the front
+            surface alone.
     """
 
     supersample: int = 1

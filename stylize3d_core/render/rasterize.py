@@ -128,9 +128,10 @@ class RasterSettings:
             front-setting contributions behind the front band, and its own band):
             ``coverage * front + (1 - coverage) * behind``. Silhouettes are anti-aliased instead
             of grown by up to a pixel; a pixel with nothing behind shows its front alone.
-            Supersampling (2) ignores it: its sub-pixel z-buffer anti-aliases silhouettes, and its
-            sub-pixel splats of grown points, which do not tile the sub-pixels, would not measure
-            the coverage (a magnified surface would let the one behind show through).
+            Needs ``point_size`` (grown splats tile the view, so their weight measures the
+            coverage; bilinear splats of a magnified surface do not, and the surface behind would
+            show through it); supersampling (2) ignores it: its sub-pixel z-buffer anti-aliases
+            silhouettes, and the sub-pixel splats of grown points do not tile the sub-pixels.
     """
 
     height: int
@@ -368,7 +369,9 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
         near = own
 
     tol = 1.0 + settings.depth_tolerance
-    blend = settings.blend_coverage and s == 1  # at 2x the sub-pixel z-buffer anti-aliases silhouettes
+    # at 2x the sub-pixel z-buffer anti-aliases silhouettes; without point sizes a magnified surface's
+    # bilinear splats do not tile the view, so their weight does not measure the coverage
+    blend = settings.blend_coverage and s == 1 and point_size is not None
     zback = torch.full((Hs * Ws,), math.inf, dtype=dtype, device=dev) if blend else None  # next surface's front
     tested: Dict[int, list] = {}  # reach -> per chunk (rows, pixel, weight, kept, c00, back, cover), in point order
     for parts in chunks:

@@ -97,7 +97,7 @@ def rasterize_points_reference(
     own_front = {key: strong[key] if strong[key] < math.inf else min(z for _, _, z, _, _ in c)
                  for key, c in received.items()}
     tol = 1.0 + settings.depth_tolerance
-    blend = settings.blend_coverage and s == 1  # supersampling anti-aliases by its sub-pixels instead
+    blend = settings.blend_coverage and s == 1 and point_size is not None  # see RasterSettings.blend_coverage
     for (i, j), contributions in received.items():
         zmin = own_front[(i, j)]
         if s == 2:  # visibility splatting: also the nearest front-setting depth of the 3 x 3 neighbourhood

@@ -674,8 +674,11 @@ def test_blend_coverage_antialiases_a_silhouette(raster):
     K = simple_K()
     pts, _ = scene(K, [(2.5 + 0.3, 3.5, 1.0), (3.5, 3.5, 2.0), (3.5, 1.5, 1.0)], C=1)
     feats = torch.tensor([[1.0], [0.0], [1.0]], dtype=F64)
-    hard = raster(pts, feats, K, RasterSettings(6, 8))
-    soft = raster(pts, feats, K, RasterSettings(6, 8, blend_coverage=True))
+    size = footprint(pts, K, 1.0)  # one pixel each: bilinear splats, which tile the view
+    hard = raster(pts, feats, K, RasterSettings(6, 8), point_size=size)
+    soft = raster(pts, feats, K, RasterSettings(6, 8, blend_coverage=True), point_size=size)
+    bare = raster(pts, feats, K, RasterSettings(6, 8, blend_coverage=True))  # no sizes: not blended
+    assert torch.equal(bare.image, raster(pts, feats, K, RasterSettings(6, 8)).image)
     assert float(hard.image[0, 3, 3]) == pytest.approx(1.0)
     assert float(soft.image[0, 3, 3]) == pytest.approx(0.3)
     assert float(soft.image[0, 3, 2]) == pytest.approx(1.0)  # covered 0.7, nothing behind: the front alone
@@ -732,6 +735,6 @@ def test_blend_coverage_matches_reference_and_chunks(supersample, soft_edges, se
         plain = rasterize_points(pts, feats, K, dataclasses.replace(settings, blend_coverage=False), point_size=size)
         blended += int((~torch.isclose(plain.image, fast.image, atol=1e-9)).any(0).sum())
     if supersample == 1:
-        assert blended > 0  # some pixels were blended
+        assert blended > 0  # some pixels were blended (with point sizes)
     else:  # the sub-pixel z-buffer anti-aliases instead
         assert blended == 0
