@@ -25,6 +25,7 @@ Run from the repository root: ``.venv/bin/python benchmarks/bench_holes.py [--si
 from __future__ import annotations
 
 import argparse
+import ast
 import dataclasses
 import sys
 from pathlib import Path
@@ -86,9 +87,14 @@ def main() -> None:
                         help="LDISettings.border_hidden (the hidden layer behind what the frame's edge cuts)")
     parser.add_argument("--depth-tolerance", type=float, default=PlainRenderSettings().depth_tolerance,
                         help="the renderer's z-test band; 1.0 keeps every tap (holes then are pure coverage gaps)")
+    parser.add_argument("--ldi", action="append", default=[], metavar="NAME=VALUE",
+                        help="an LDISettings field (a Python literal), e.g. --ldi hidden_depth=\"'surface'\"; repeatable")
     args = parser.parse_args()
     only = {n for n in args.photos.split(",") if n}
     ldi_settings = LDISettings()
+    for item in args.ldi:
+        key, _, value = item.partition("=")
+        ldi_settings = dataclasses.replace(ldi_settings, **{key: ast.literal_eval(value)})
     if args.border_hidden != "default":
         ldi_settings = dataclasses.replace(ldi_settings, border_hidden=args.border_hidden == "on")
     depth_source = PriorDepth()

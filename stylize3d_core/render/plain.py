@@ -59,6 +59,12 @@ class PlainRenderSettings:
             (their disparities differ by at most :data:`STRETCH_JUMP`): a surface seen at
             a slant or magnified unevenly (a forward dolly over rough depth) shows no
             gaps. False: the splat grows with the magnification at the point only.
+        blend_coverage: True (default): a pixel a nearer surface covers only partly (a
+            silhouette) shows it over the surface behind, by the share it covers
+            (``RasterSettings.blend_coverage``), so silhouettes are anti-aliased rather than
+            grown by up to a pixel (at ``supersample`` 1 with ``grow_splats`` and a
+            :class:`PointCloud`; 2 anti-aliases by its sub-pixels instead); False: the front
+            surface alone.
     """
 
     supersample: int = 1
@@ -68,6 +74,7 @@ class PlainRenderSettings:
     grow_splats: bool = True
     soft_edges: bool = True
     stretch_splats: bool = True
+    blend_coverage: bool = True
 
     def __post_init__(self) -> None:
         if self.supersample not in (1, 2):
@@ -242,7 +249,7 @@ class PlainRenderer:
         raster = RasterSettings(
             height=int(height), width=int(width),
             depth_tolerance=self.settings.depth_tolerance, supersample=self.settings.supersample,
-            soft_edges=self.settings.soft_edges,
+            soft_edges=self.settings.soft_edges, blend_coverage=self.settings.blend_coverage,
         )
         size = self._size
         if size is not None and keep < self.num_points:  # a full frame uses the cached sizes as they are

@@ -23,9 +23,14 @@ still overlap and a magnified surface shows no gaps. With ``k <= 1`` (and
 without sizes) the splat is the bilinear one above, which is the tent with ``k = 1``.
 
 Z-buffer ("bilinear splat among the front-most surface"): per pixel, ``zmin`` is
-the smallest depth among the contributions it receives. Only contributions with
-``z <= zmin * (1 + depth_tolerance)`` are kept, so the points of one surface
-blend while a surface behind it is hidden. The pixel's feature is the weighted
+the smallest depth among the *front-setting* contributions it receives: those
+whose weight is at least ``hole_weight_threshold`` (a tap too faint to show its
+point on its own, such as the ~1e-7 tap a point almost on a pixel centre gives
+its neighbours, must not hide the surface behind it either); a pixel with none
+takes the smallest depth of all it receives. Only contributions with
+``zmin / (1 + depth_tolerance) <= z <= zmin * (1 + depth_tolerance)`` are kept, so
+the points of one surface blend while a surface behind it is hidden (and the
+faint taps of a nearer one are dropped). The pixel's feature is the weighted
 mean of its kept contributions, ``sum(w * f) / sum(w)``. A pixel whose kept
 weight sum is below ``hole_weight_threshold`` is a *hole*: its feature is 0
 (the caller fills holes, e.g. :func:`stylize3d_core.render.holes.fill_holes`).
@@ -42,8 +47,8 @@ mean of the kept contributions of its 2 x 2 sub-pixels (the average pool of
 every point deposits a total weight of 1 at either setting and the hole
 threshold means the same) and its depth the front-most of theirs. The
 splats of neighbouring points lie 2 sub-pixels apart at (2H, 2W), so the
-z-buffer test uses the nearest depth in each sub-pixel's 3 x 3 neighbourhood
-("visibility splatting"): a farther surface cannot show through the gaps of a
+z-buffer test also uses the nearest front-setting depth in each sub-pixel's 3 x 3
+neighbourhood ("visibility splatting"): a farther surface cannot show through the gaps of a
 nearer one, even when the camera magnifies it up to 2x.
 
 Implementation: the z-buffer is a ``scatter_reduce_("amin")`` over the corners
@@ -92,7 +97,8 @@ class RasterSettings:
         height: output image height H in pixels, 1..16384.
         width: output image width W in pixels, 1..16384.
         depth_tolerance: relative depth band of the front surface; a contribution
-            is kept when ``z <= zmin * (1 + depth_tolerance)``. Default 0.02: 2 % of
+            is kept when ``zmin / (1 + depth_tolerance) <= z <= zmin * (1 + depth_tolerance)``
+            (``zmin``: the front, see the module docstring). Default 0.02: 2 % of
             the depth, i.e. ~0.007 scene units at the normalised near depth 1/3, far
             more than the depth step between neighbouring points of one surface and
             far less than the gap at an occlusion edge. In [0, 1].
@@ -105,14 +111,27 @@ class RasterSettings:
         near_clip: points with ``z <= near_clip`` (scene units) are culled.
             Default 1e-3, 1/333 of the normalised near depth 1/3. Finite and > 0.
         soft_edges: False (default): a (sub-)pixel's front depth is the least depth of
-            every contribution it receives. True: only *core* contributions (every
+            the contributions of weight >= ``hole_weight_threshold`` it receives (of all,
+            where it has none), and contributions nearer than the front band are dropped.
+            True: of those, only *core* contributions (every
             bilinear one, and a grown splat's taps of weight >= :data:`CORE_WEIGHT` /
             half-width^2, which it gives to at least the pixel nearest it) set the
-            front, where there is one, and
-            contributions nearer than the front band are dropped: the thin fringe of a
+            front, where there is one: the thin fringe of a
             nearer surface's splats gives way to the surface behind instead of hiding it
             (or, below the hole threshold, leaving a hole), so silhouettes keep their
             size however large the splats grow.
+        blend_coverage: False (default): a pixel shows its front surface alone (normalised by
+            its weight). True: a pixel the front covers only partly (its *coverage*, the front's
+            kept weight times each splat's squared half-width, below 1, as at a silhouette, where
+            the bilinear weight of the last point is the share of the pixel its footprint covers)
+            shows the front over the next surface behind it (the nearest depth of the
+            front-setting contributions behind the front band, and its own band):
+            ``coverage * front + (1 - coverage) * behind``. Silhouettes are anti-aliased instead
+            of grown by up to a pixel; a pixel with nothing behind shows its front alone.
+            Needs ``point_size`` (grown splats tile the view, so their weight measures the
+            coverage; bilinear splats of a magnified surface do not, and the surface behind would
+            show through it); supersampling (2) ignores it: its sub-pixel z-buffer anti-aliases
+            silhouettes, and the sub-pixel splats of grown points do not tile the sub-pixels.
     """
 
     height: int
@@ -122,6 +141,7 @@ class RasterSettings:
     hole_weight_threshold: float = 1e-3
     near_clip: float = 1e-3
     soft_edges: bool = False
+    blend_coverage: bool = False
 
     def __post_init__(self) -> None:
         for name in ("height", "width", "supersample"):
@@ -147,7 +167,9 @@ class Fragments(NamedTuple):
             ``torch.channels_last`` batch (call ``.contiguous()`` for NCHW memory).
         weight: (H, W) kept weight sum, in the features' dtype (it can be > 0,
             though below the threshold, at holes).
-        depth: (H, W) front-most depth, in the features' dtype; ``+inf`` at holes
+        depth: (H, W) front depth (the least over its sub-pixels with supersampling), in the
+            features' dtype: the least depth of the front-setting contributions (see the
+            module docstring), or of all where there are none; ``+inf`` at holes
             (a z-buffer value, not an image: mask it with ``hole`` before use).
         hole: (H, W) bool, True where the kept weight sum is below the threshold.
     """
@@ -187,6 +209,9 @@ class _Splats(NamedTuple):
     taps: int  # taps per point when uniform, else 0
     corner00: Optional[torch.Tensor] = None  # (M,) int64 output pixel of corner 00 (unmasked), bilinear 4-tap
     # splats at supersample 1 only
+    back_weight: Optional[torch.Tensor] = None  # (E,) blend_coverage: splat weight of the entries kept
+    # on the surface behind the front, 0 elsewhere
+    cover: Optional[torch.Tensor] = None  # (E,) blend_coverage: front entries' weight * half-width^2, 0 elsewhere
 
 
 def _check_inputs(points_cam: torch.Tensor, features: torch.Tensor, K: torch.Tensor, settings,
@@ -266,8 +291,9 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
     Ks = K.detach().to(device=dev, dtype=dtype).clone()
     Ks[:2] *= s  # (3, 3) intrinsics of the sub-pixel raster
     soft = settings.soft_edges
-    zbuf = torch.full((Hs * Ws,), math.inf, dtype=dtype, device=dev)
-    zcore = torch.full((Hs * Ws,), math.inf, dtype=dtype, device=dev) if soft else zbuf
+    zbuf = torch.full((Hs * Ws,), math.inf, dtype=dtype, device=dev)  # least depth of every tap
+    zfront = torch.full((Hs * Ws,), math.inf, dtype=dtype, device=dev)  # least depth of the front-setting taps
+    strong_weight = settings.hole_weight_threshold
 
     chunks: List[Dict[int, tuple]] = []  # per chunk: reach -> (rows, w, ok, q, o, zg, c00)
     survivors = []
@@ -318,39 +344,67 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
             q = torch.where(ok, yi * Ws + xi, 0)  # (T, mg) raster index
             o = yi * W + xi if s == 1 else (yi >> 1) * W + (xi >> 1)  # (T, mg) output pixel of each tap
             zbuf.scatter_reduce_(0, q.reshape(-1), torch.where(ok, zg, math.inf).reshape(-1), reduce="amin")
-            if soft:
-                core = ok & ((w >= CORE_WEIGHT / (hg * hg)) | (hg == 1.0))  # (T, mg): bilinear taps all are
-                zcore.scatter_reduce_(0, q.reshape(-1), torch.where(core, zg, math.inf).reshape(-1), reduce="amin")
+            # Front-setting taps: a tap too faint to show its point on its own (weight below the
+            # hole threshold) must not hide the surface behind it either.
+            sets = ok & (w >= strong_weight)  # (T, mg)
+            if soft:  # and only core taps (bilinear taps all are)
+                sets &= (w >= CORE_WEIGHT / (hg * hg)) | (hg == 1.0)
+            zfront.scatter_reduce_(0, q.reshape(-1), torch.where(sets, zg, math.inf).reshape(-1), reduce="amin")
             rows = idx if sel is None else idx.index_select(0, sel)
             c00 = o[0] if (r == 1 and s == 1) else None  # (mg,) corner 00 = y0 * W + x0, unmasked
-            parts[r] = (rows, w, ok, q, o, zg, c00)
+            parts[r] = (rows, w, ok, q, o, zg, c00, sets, hg)
         chunks.append(parts)
 
-    front_buf = torch.where(zcore < math.inf, zcore, zbuf) if soft else zbuf
+    # A (sub-)pixel's own front: its front-setting taps' least depth, where it has one, else its
+    # least depth of all (a pixel reached by faint taps alone; it is a hole unless they add up).
+    own = torch.where(zfront < math.inf, zfront, zbuf)  # (Hs * Ws,)
     if s == 2:
         _check_stop(should_stop)
-        # Visibility splatting: a sub-pixel's front is the nearest depth in its 3 x 3
-        # neighbourhood, so a surface behind cannot show through the gaps between
+        # Visibility splatting: a sub-pixel's front is also the nearest front-setting depth in its
+        # 3 x 3 neighbourhood, so a surface behind cannot show through the gaps between
         # the 2 x 2 splats of a front surface (they are 2 sub-pixels apart).
-        near = -F.max_pool2d(-front_buf.view(1, 1, Hs, Ws), 3, stride=1, padding=1).view(-1)  # (Hs * Ws,)
+        near = -F.max_pool2d(-zfront.view(1, 1, Hs, Ws), 3, stride=1, padding=1).view(-1)  # (Hs * Ws,)
+        near = torch.minimum(near, own)
     else:
-        near = front_buf
+        near = own
 
-    tested: Dict[int, list] = {}  # reach -> per chunk (rows, pixel, weight, kept, c00), in point order
+    tol = 1.0 + settings.depth_tolerance
+    # at 2x the sub-pixel z-buffer anti-aliases silhouettes; without point sizes a magnified surface's
+    # bilinear splats do not tile the view, so their weight does not measure the coverage
+    blend = settings.blend_coverage and s == 1 and point_size is not None
+    zback = torch.full((Hs * Ws,), math.inf, dtype=dtype, device=dev) if blend else None  # next surface's front
+    tested: Dict[int, list] = {}  # reach -> per chunk (rows, pixel, weight, kept, c00, back, cover), in point order
     for parts in chunks:
         if len(chunks) > 1:
             _check_stop(should_stop)
-        for r, (rows, w, ok, q, o, zg, c00) in parts.items():
+        for r, (rows, w, ok, q, o, zg, c00, sets, hg) in parts.items():
             front = near.index_select(0, q.reshape(-1)).view_as(q)  # (T, mg)
-            keep = (zg <= front * (1.0 + settings.depth_tolerance)) & ok  # (T, mg)
-            if soft:  # a nearer surface's fringe gives way to the core-set front
-                keep &= zg * (1.0 + settings.depth_tolerance) >= front
-            tested.setdefault(r, []).append((rows, torch.where(keep, o, 0), torch.where(keep, w, 0.0), keep, c00))
+            keep = (zg <= front * tol) & ok  # (T, mg)
+            # a nearer surface's faint taps (or, with soft edges, its fringe) give way to the front
+            keep &= zg * tol >= front
+            if blend:  # the front-setting taps behind the front band set the next surface's front
+                behind = sets & (zg > front * tol)
+                zback.scatter_reduce_(0, q.reshape(-1), torch.where(behind, zg, math.inf).reshape(-1), reduce="amin")
+            tested.setdefault(r, []).append([rows, torch.where(keep, o, 0), torch.where(keep, w, 0.0), keep, c00,
+                                             None, None])
+    if blend:
+        for k, parts in enumerate(chunks):
+            if len(chunks) > 1:
+                _check_stop(should_stop)
+            for r, (rows, w, ok, q, o, zg, c00, sets, hg) in parts.items():
+                entry = tested[r][sum(1 for c in chunks[:k] if r in c)]
+                front = near.index_select(0, q.reshape(-1)).view_as(q)
+                z2 = zback.index_select(0, q.reshape(-1)).view_as(q)
+                back = ok & (zg > front * tol) & (zg <= z2 * tol) & (zg * tol >= z2)  # (T, mg)
+                entry[1] = torch.where(back, o, entry[1])
+                entry[3] = entry[3] | back
+                entry[5] = torch.where(back, w, 0.0)
+                entry[6] = torch.where(entry[3] & ~back, w * (hg * hg), 0.0)  # coverage of the kept front taps
 
     # Join the chunks per group (along the points, which keeps them ascending), groups by tap count:
     # the same layout as one chunk.
     cat1 = (lambda xs, dim=0: xs[0] if len(xs) == 1 else torch.cat(xs, dim))
-    entry_point, pixel, weight, kept = [], [], [], []
+    entry_point, pixel, weight, kept, back_w, cover = [], [], [], [], [], []
     for r in sorted(tested):
         pieces = tested[r]
         rows = cat1([p[0] for p in pieces])  # (Mg,)
@@ -358,8 +412,11 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
         pixel.append(cat1([p[1] for p in pieces], 1).reshape(-1))
         weight.append(cat1([p[2] for p in pieces], 1).reshape(-1))
         kept.append(cat1([p[3] for p in pieces], 1).reshape(-1))
+        if blend:
+            back_w.append(cat1([p[5] for p in pieces], 1).reshape(-1))
+            cover.append(cat1([p[6] for p in pieces], 1).reshape(-1))
         entry_point.append(rows.repeat(T))  # tap-major, as the (T, Mg) rows
-    depth = zbuf.view(Hs, Ws)
+    depth = own.view(Hs, Ws)
     if s == 2:
         depth = depth.reshape(H, 2, W, 2).amin(dim=(1, 3))
     taps = tested[next(iter(tested))][0][1].shape[0] if len(tested) == 1 else 0
@@ -372,7 +429,8 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
         c00 = torch.zeros(0, dtype=torch.long, device=dev)
     cat = (lambda xs, like: torch.cat(xs) if xs else torch.zeros(0, dtype=like, device=dev))
     return _Splats(cat1(survivors), cat(entry_point, torch.long), cat(pixel, torch.long), cat(weight, dtype),
-                   cat(kept, torch.bool), depth.clone(), taps, c00)
+                   cat(kept, torch.bool), depth.clone(), taps, c00,
+                   cat(back_w, dtype) if blend else None, cat(cover, dtype) if blend else None)
 
 
 def _bag_sum(index: torch.Tensor, table: torch.Tensor, offsets: torch.Tensor, weights: torch.Tensor):
@@ -467,14 +525,18 @@ def rasterize_points(
             wsum.index_add_(0, pix[piece], w_all[piece])  # (HW,)
         hole = wsum < settings.hole_weight_threshold  # (HW,)
         inv = torch.where(hole, 0.0, 1.0 / wsum.clamp_min(settings.hole_weight_threshold))  # (HW,)
+        nw = None  # (E,) entry weights normalised per pixel, 0 at holes (when not simply w * inv)
+        if sp.back_weight is not None:
+            nw = _blend_weights(sp, w_all, inv, hole, H * W, settings.hole_weight_threshold, step, should_stop)
     table = features if features.is_contiguous() else features.contiguous()
     if torch.is_grad_enabled() and features.requires_grad:
         with torch.no_grad():
-            pix_e, pt_e, w_e = _kept_entries(sp, w_all, inv, step, should_stop)
+            pix_e, pt_e, w_e = _kept_entries(sp, w_all, inv, step, should_stop, nw)
             pix_index, pix_offsets, pix_weights = _pixel_bags(pix_e, pt_e, w_e, 0, H * W)
             # Point-major bags for the gradient: the taps of each surviving point
             # (weight 0 where not kept), none for culled points.
-            nw = w_all * inv.index_select(0, pix)  # (E,) weights normalised per pixel, 0 at holes
+            if nw is None:
+                nw = w_all * inv.index_select(0, pix)  # (E,) weights normalised per pixel, 0 at holes
             if sp.taps:
                 pt_index = pix.view(sp.taps, M).t().reshape(-1)  # (E,)
                 pt_weights = nw.view(sp.taps, M).t().reshape(-1)
@@ -486,10 +548,10 @@ def rasterize_points(
         out = _SparseSplat.apply(table, pix_index, pix_offsets, pix_weights, pt_index, pt_offsets, pt_weights)
     elif sp.corner00 is not None and C <= CORNER_PATH_MAX_CHANNELS:
         with torch.no_grad():
-            out = _accumulate_by_corner(sp, inv, table, W, H * W, step, should_stop)
+            out = _accumulate_by_corner(sp, inv, table, W, H * W, step, should_stop, nw)
     else:
         with torch.no_grad():
-            pix_e, pt_e, w_e = _kept_entries(sp, w_all, inv, step, should_stop)
+            pix_e, pt_e, w_e = _kept_entries(sp, w_all, inv, step, should_stop, nw)
             out = _accumulate(pix_e, pt_e, w_e, table, H * W, step, should_stop)
     image = out.view(H, W, C).permute(2, 0, 1)  # (C, H, W), channels-last memory
     hole = hole.view(H, W)
@@ -497,11 +559,35 @@ def rasterize_points(
     return Fragments(image, wsum.view(H, W), depth, hole)
 
 
+def _blend_weights(sp: _Splats, w_all: torch.Tensor, inv: torch.Tensor, hole: torch.Tensor, n_pixels: int,
+                   threshold: float, step: Optional[int], should_stop: Optional[Callable[[], bool]]) -> torch.Tensor:
+    """(E,) entry weights of ``blend_coverage``: ``coverage * front + (1 - coverage) * behind`` per pixel.
+
+    A pixel's coverage is the sum of its front entries' ``cover`` (weight times the splat's squared
+    half-width, so a surface of points one splat half-width apart covers 1), at most 1; where the
+    surface behind has a kept weight of at least ``threshold``, the front's normalised weights are
+    scaled by the coverage and the behind's by the rest; elsewhere the front alone is normalised.
+    """
+    dt = w_all.dtype
+    cov = torch.zeros(n_pixels, dtype=dt, device=w_all.device)
+    wback = torch.zeros(n_pixels, dtype=dt, device=w_all.device)
+    pix = sp.pixel
+    back, cover = sp.back_weight.to(dt), sp.cover.to(dt)
+    for piece in _pieces(pix.shape[0], step):  # in order, as the weight sums
+        _check_stop(should_stop)
+        cov.index_add_(0, pix[piece], cover[piece])
+        wback.index_add_(0, pix[piece], back[piece])
+    blended = (wback >= threshold) & ~hole  # (HW,)
+    alpha = torch.where(blended, cov.clamp(max=1.0), 1.0)
+    inv_back = torch.where(blended, (1.0 - alpha) / wback.clamp_min(threshold), 0.0)
+    return w_all * (inv * alpha).index_select(0, pix) + back * inv_back.index_select(0, pix)
+
+
 def _kept_entries(sp: _Splats, w_all: torch.Tensor, inv: torch.Tensor, step: Optional[int],
-                  should_stop: Optional[Callable[[], bool]]):
+                  should_stop: Optional[Callable[[], bool]], nw: Optional[torch.Tensor] = None):
     """The kept entries, in entry order (cache friendly): pixel (E',) int64, feature row (E',) int32 and
-    weight normalised per pixel (E',) (0 at holes). int32 sorts and gathers faster; indices are < 2**28
-    (MAX_IMAGE_SIDE**2) and N < 2**31."""
+    weight normalised per pixel (E',) (0 at holes; ``nw`` (E,) when given, else ``w_all * inv``). int32
+    sorts and gathers faster; indices are < 2**28 (MAX_IMAGE_SIDE**2) and N < 2**31."""
     E = sp.pixel.shape[0]
     pt_all = sp.entry_point.int()  # (E,)
     pix_l, pt_l, w_l = [], [], []
@@ -511,12 +597,13 @@ def _kept_entries(sp: _Splats, w_all: torch.Tensor, inv: torch.Tensor, step: Opt
         pix_c = sp.pixel.index_select(0, e)
         pix_l.append(pix_c)
         pt_l.append(pt_all.index_select(0, e))
-        w_l.append(w_all.index_select(0, e) * inv.index_select(0, pix_c))
+        w_l.append(w_all.index_select(0, e) * inv.index_select(0, pix_c) if nw is None else nw.index_select(0, e))
     return tuple(t[0] if len(t) == 1 else torch.cat(t) for t in (pix_l, pt_l, w_l))
 
 
 def _accumulate_by_corner(sp: _Splats, inv: torch.Tensor, table: torch.Tensor, W: int, n_pixels: int,
-                          step: Optional[int], should_stop: Optional[Callable[[], bool]]) -> torch.Tensor:
+                          step: Optional[int], should_stop: Optional[Callable[[], bool]],
+                          nw: Optional[torch.Tensor] = None) -> torch.Tensor:
     """(n_pixels, C) weighted feature sums at supersample 1 (inference only, bilinear 4-tap splats: the
     entries are (4, M) corner-major), with one sort of the M points.
 
@@ -529,7 +616,7 @@ def _accumulate_by_corner(sp: _Splats, inv: torch.Tensor, table: torch.Tensor, W
     """
     _check_stop(should_stop)
     M = sp.point.shape[0]
-    kept4, weight4 = sp.kept.view(4, M), sp.weight.view(4, M)
+    kept4, weight4 = sp.kept.view(4, M), sp.weight.view(4, M) if nw is None else nw.view(4, M)
     order = torch.sort(sp.corner00.int(), stable=True).indices  # (M,)
     o_sorted = sp.corner00.index_select(0, order)  # (M,) ascending
     pt_sorted = sp.point.int().index_select(0, order)
@@ -538,7 +625,9 @@ def _accumulate_by_corner(sp: _Splats, inv: torch.Tensor, table: torch.Tensor, W
         _check_stop(should_stop)
         e = kept4[c].index_select(0, order).nonzero().squeeze(1)  # (e,) ascending
         pix = o_sorted.index_select(0, e) + off  # (e,) ascending, in [0, n_pixels)
-        w = weight4[c].index_select(0, order).index_select(0, e).to(table.dtype) * inv.index_select(0, pix)
+        w = weight4[c].index_select(0, order).index_select(0, e).to(table.dtype)
+        if nw is None:
+            w = w * inv.index_select(0, pix)
         lists.append((pix, pt_sorted.index_select(0, e), w))
     E = sum(int(p.shape[0]) for p, _, _ in lists)
     n_bands = 1 if step is None else max(1, -(-E // step))

@@ -3,8 +3,8 @@
 Python loops over points and pixels, float64 throughout; for tests on small
 inputs only. Semantics (see the fast module's docstring) are spelled out step
 by step: cull, splat each point bilinearly onto its 2 x 2 (sub-)pixels, find the
-front-most depth per (sub-)pixel, keep the contributions within the relative
-depth tolerance, pool sub-pixels into output pixels, normalise.
+front depth per (sub-)pixel (set by taps of weight >= the hole threshold), keep the
+contributions within the relative depth tolerance of it, pool sub-pixels into output pixels, normalise.
 
 The image is built as ``A @ features`` with a dense (H*W, N) coefficient matrix
 ``A``, so autograd gives the reference gradient with respect to the features.
@@ -76,36 +76,56 @@ def rasterize_points_reference(
             for j, wx in cols:
                 w = wx * wy
                 if w > 0 and 0 <= i < Hs and 0 <= j < Ws:
-                    received[(i, j)].append((n, w, z, half == 1.0 or w >= CORE_WEIGHT / half**2))
+                    received[(i, j)].append((n, w, z, half == 1.0 or w >= CORE_WEIGHT / half**2, half))
 
     # 2. Z-buffer per sub-pixel, keep the front surface, pool into output pixels.
     A = torch.zeros(H * W, N, dtype=torch.float64)
     wsum = torch.zeros(H * W, dtype=torch.float64)
+    B = torch.zeros(H * W, N, dtype=torch.float64)  # blend_coverage: the surface behind the front
+    wback = torch.zeros(H * W, dtype=torch.float64)
+    cover = torch.zeros(H * W, dtype=torch.float64)
     depth = torch.full((H * W,), math.inf, dtype=torch.float64)
-    own_min = {key: min(z for _, _, z, _ in c) for key, c in received.items()}
-    if settings.soft_edges:  # the front is set by core contributions, where a pixel has one
-        own_front = {key: min([z for _, _, z, core in c if core] or [own_min[key]]) for key, c in received.items()}
-    else:
-        own_front = own_min
+    def sets_front(w, core):
+        # a tap too faint to show its point alone (below the hole threshold) does not hide what is
+        # behind; with soft edges, only core taps set the front
+        return w >= settings.hole_weight_threshold and (core or not settings.soft_edges)
+
+    # the least depth of the front-setting contributions (inf where none), and the own front:
+    # that, or the least depth of all where a (sub-)pixel has no front-setting contribution
+    strong = {key: min([z for _, w, z, core, _ in c if sets_front(w, core)] or [math.inf])
+              for key, c in received.items()}
+    own_front = {key: strong[key] if strong[key] < math.inf else min(z for _, _, z, _, _ in c)
+                 for key, c in received.items()}
+    tol = 1.0 + settings.depth_tolerance
+    blend = settings.blend_coverage and s == 1 and point_size is not None  # see RasterSettings.blend_coverage
     for (i, j), contributions in received.items():
         zmin = own_front[(i, j)]
-        if s == 2:  # visibility splatting: the nearest depth of the 3 x 3 sub-pixel neighbourhood
-            zmin = min(own_front.get((i + di, j + dj), math.inf) for di in (-1, 0, 1) for dj in (-1, 0, 1))
+        if s == 2:  # visibility splatting: also the nearest front-setting depth of the 3 x 3 neighbourhood
+            zmin = min([zmin] + [strong.get((i + di, j + dj), math.inf) for di in (-1, 0, 1) for dj in (-1, 0, 1)])
         p = (i // s) * W + (j // s)
-        depth[p] = min(float(depth[p]), own_min[(i, j)])
-        for n, w, z, _ in contributions:
-            if settings.soft_edges and z * (1.0 + settings.depth_tolerance) < zmin:
-                continue  # a nearer surface's fringe gives way to the core-set front
-            if z <= zmin * (1.0 + settings.depth_tolerance):
+        depth[p] = min(float(depth[p]), own_front[(i, j)])
+        # blend_coverage: the next surface's front, set by the front-setting taps behind the front band
+        z2 = min([z for _, w, z, core, _ in contributions if z > zmin * tol and sets_front(w, core)] or [math.inf])
+        for n, w, z, _, half in contributions:
+            if z * tol < zmin:
+                continue  # a nearer surface's faint taps (soft edges: its fringe) give way to the front
+            if z <= zmin * tol:
                 A[p, n] += w
                 wsum[p] += w
+                cover[p] += w * half * half
+            elif blend and z2 <= z * tol and z <= z2 * tol:
+                B[p, n] += w
+                wback[p] += w
 
-    # 3. Normalise; holes get zero.
+    # 3. Normalise; holes get zero. With blend_coverage, a partly covered front over the surface behind.
     hole = wsum < settings.hole_weight_threshold
     for p in range(H * W):
         if hole[p]:
             A[p] = 0.0
             depth[p] = math.inf
+        elif blend and wback[p] >= settings.hole_weight_threshold:
+            alpha = min(1.0, float(cover[p]))
+            A[p] = A[p] / wsum[p] * alpha + B[p] / wback[p] * (1.0 - alpha)
         else:
             A[p] /= wsum[p]
     image = (A @ features.double()).T.reshape(C, H, W)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import pytest
@@ -121,6 +122,49 @@ def test_zero_weight_corner_does_not_occlude(raster):
     assert frag.weight[3, 3].item() == pytest.approx(0.75) and frag.depth[3, 3] == 2.0
     assert torch.allclose(frag.image[:, 3, 3], feats[1])
     assert frag.weight[3, 2] == 1.0 and torch.allclose(frag.image[:, 3, 2], feats[0])
+
+
+@pytest.mark.parametrize("soft_edges", [False, True])
+@pytest.mark.parametrize("supersample", [1, 2])
+def test_faint_tap_of_a_nearer_point_does_not_hide_the_surface_behind(raster, supersample, soft_edges):
+    """A near point almost on a pixel centre gives the next column a tap of ~1e-5, below the hole
+    threshold: it must neither hide the far surface's own point there nor leave a hole."""
+    K = simple_K()
+    settings = RasterSettings(6, 8, supersample=supersample, soft_edges=soft_edges)
+    # the near point's faint tap lands on column 3 (on its left sub-pixel column at 2x)
+    u_near = 2.5 if supersample == 1 else 2.75
+    for eps, faint in ((1e-5, True), (2e-2, False)):
+        pts, _ = scene(K, [(u_near + eps, 3.5, 1.0), (3.5, 3.5, 2.0), (4.5, 3.5, 2.0)], C=1)
+        feats = torch.tensor([[1.0], [0.0], [0.0]], dtype=F64)  # near 1, far 0
+        frag = raster(pts, feats, K, settings)
+        assert not frag.hole[3, 2] and float(frag.image[0, 3, 2]) == pytest.approx(1.0)
+        assert not frag.hole[3, 3]
+        if faint:  # the far surface shows, and the z-buffer holds its depth
+            assert float(frag.image[0, 3, 3]) == pytest.approx(0.0, abs=1e-3) and float(frag.depth[3, 3]) == 2.0
+        else:  # a tap above the threshold still occludes
+            assert float(frag.image[0, 3, 3]) == pytest.approx(1.0) and float(frag.depth[3, 3]) == 1.0
+        assert_no_nan(frag)
+
+
+@pytest.mark.parametrize("supersample", [1, 2])
+def test_photo_grid_edge_over_a_far_surface_has_no_holes(raster, supersample):
+    """An LDI-like layer: a near half-plane and a far plane, one point per pixel centre (with the
+    rounding jitter of a real projection, 1e-6 px, rightwards on even rows); the column next to the
+    near edge shows the far plane, not a hole."""
+    H, W = 5, 8
+    K = simple_K(H, W)
+    g = torch.Generator().manual_seed(3)
+    specs = [(j + 0.5, i + 0.5, 1.0 if j < 4 else 2.0) for i in range(H) for j in range(W)]
+    pts, _ = scene(K, specs, C=1)
+    jitter = (torch.rand(len(specs), 2, generator=g, dtype=F64) - 0.5) * 2e-6
+    jitter[:, 0] = torch.tensor([1e-6 if i % 2 == 0 else -1e-6 for i in range(H) for _ in range(W)], dtype=F64)
+    pts[:, :2] += jitter * pts[:, 2:] / K[0, 0]
+    feats = torch.tensor([[1.0 if z == 1.0 else 0.0] for _, _, z in specs], dtype=F64)
+    frag = raster(pts, feats, K, RasterSettings(H, W, supersample=supersample))
+    assert not frag.hole.any()
+    assert torch.allclose(frag.image[0, :, :4], torch.ones((), dtype=F64))
+    assert torch.allclose(frag.image[0, :, 4:], torch.zeros((), dtype=F64), atol=1e-3)
+    assert torch.allclose(frag.depth[:, 4:], torch.full((), 2.0, dtype=F64))
 
 
 def test_points_within_depth_tolerance_blend(raster):
@@ -618,3 +662,79 @@ def test_point_rasterizer_takes_point_size_and_should_stop():
     assert torch.equal(frag.hole, expected.hole)
     with pytest.raises(RenderInterrupted):
         PointRasterizer(settings)(pts, feats, cameras, sizes, should_stop=lambda: True)
+
+
+# ----------------------------------------------------------------------------- coverage blending
+
+
+def test_blend_coverage_antialiases_a_silhouette(raster):
+    """A near point 0.3 px past a pixel boundary covers 0.3 of the next pixel (its bilinear weight):
+    with blend_coverage that pixel shows 0.3 near over 0.7 of the far surface behind; without it,
+    the near surface alone. A pixel with nothing behind shows its front alone either way."""
+    K = simple_K()
+    pts, _ = scene(K, [(2.5 + 0.3, 3.5, 1.0), (3.5, 3.5, 2.0), (3.5, 1.5, 1.0)], C=1)
+    feats = torch.tensor([[1.0], [0.0], [1.0]], dtype=F64)
+    size = footprint(pts, K, 1.0)  # one pixel each: bilinear splats, which tile the view
+    hard = raster(pts, feats, K, RasterSettings(6, 8), point_size=size)
+    soft = raster(pts, feats, K, RasterSettings(6, 8, blend_coverage=True), point_size=size)
+    bare = raster(pts, feats, K, RasterSettings(6, 8, blend_coverage=True))  # no sizes: not blended
+    assert torch.equal(bare.image, raster(pts, feats, K, RasterSettings(6, 8)).image)
+    assert float(hard.image[0, 3, 3]) == pytest.approx(1.0)
+    assert float(soft.image[0, 3, 3]) == pytest.approx(0.3)
+    assert float(soft.image[0, 3, 2]) == pytest.approx(1.0)  # covered 0.7, nothing behind: the front alone
+    assert float(soft.image[0, 1, 3]) == pytest.approx(1.0)  # a lone point
+    for frag in (hard, soft):  # the weight, depth and holes are the front's
+        assert float(frag.weight[3, 3]) == pytest.approx(0.3) and float(frag.depth[3, 3]) == 1.0
+    assert torch.equal(hard.hole, soft.hole)
+
+
+def test_blend_coverage_keeps_a_magnified_surface_opaque(raster):
+    """Grown splats of points 2 px apart (half-width 2) cover their pixels fully: the surface behind
+    does not show through, though each pixel's weight is ~1/4."""
+    K = simple_K(12, 12)
+    front = [(1.0 + 2 * i, 1.0 + 2 * j, 1.0) for i in range(6) for j in range(6)]
+    back = [(0.5 + i, 0.5 + j, 3.0) for i in range(12) for j in range(12)]
+    pts, _ = scene(K, front + back, C=1)
+    feats = torch.cat([torch.ones(len(front), 1), torch.zeros(len(back), 1)]).to(F64)
+    size = footprint(pts, K, torch.tensor([2.0] * len(front) + [1.0] * len(back), dtype=F64))
+    frag = raster(pts, feats, K, RasterSettings(12, 12, blend_coverage=True), point_size=size)
+    inner = (slice(2, 10), slice(2, 10))
+    assert float(frag.weight[inner].mean()) < 0.5
+    assert torch.allclose(frag.image[0][inner], torch.ones((), dtype=F64))
+
+
+@pytest.mark.parametrize("supersample", [1, 2])
+@pytest.mark.parametrize("soft_edges", [False, True])
+@pytest.mark.parametrize("seed", range(2))
+def test_blend_coverage_matches_reference_and_chunks(supersample, soft_edges, seed):
+    H, W = 8, 9
+    pts, feats, K = random_scene(H, W, 90, 3, seed)
+    g = torch.Generator().manual_seed(300 + seed)
+    sizes = footprint(pts, K, 0.5 + 3.0 * torch.rand(pts.shape[0], generator=g, dtype=F64)).nan_to_num(0.01)
+    settings = RasterSettings(H, W, supersample=supersample, soft_edges=soft_edges, blend_coverage=True)
+    blended = 0
+    for size in (None, sizes):
+        feats_a = feats.clone().requires_grad_(True)
+        feats_b = feats.clone().requires_grad_(True)
+        fast = rasterize_points(pts, feats_a, K, settings, point_size=size)
+        ref = rasterize_points_reference(pts, feats_b, K, settings, point_size=size)
+        assert torch.allclose(fast.image, ref.image, atol=1e-12)
+        assert torch.allclose(fast.weight, ref.weight, atol=1e-12)
+        assert torch.equal(fast.depth, ref.depth) and torch.equal(fast.hole, ref.hole)
+        upstream = torch.randn(3, H, W, dtype=F64, generator=g)
+        (fast.image * upstream).sum().backward()
+        (ref.image * upstream).sum().backward()
+        assert torch.allclose(feats_a.grad, feats_b.grad, atol=1e-12)
+        with torch.inference_mode():
+            one = rasterize_points(pts, feats, K, settings, point_size=size)
+            chunked = rasterize_points(pts, feats, K, settings, point_size=size, chunk_points=7,
+                                       should_stop=lambda: False)
+        for a, b in zip(one, chunked):
+            assert torch.equal(a, b)  # to the bit
+        assert torch.allclose(one.image, ref.image, atol=1e-12)
+        plain = rasterize_points(pts, feats, K, dataclasses.replace(settings, blend_coverage=False), point_size=size)
+        blended += int((~torch.isclose(plain.image, fast.image, atol=1e-9)).any(0).sum())
+    if supersample == 1:
+        assert blended > 0  # some pixels were blended (with point sizes)
+    else:  # the sub-pixel z-buffer anti-aliases instead
+        assert blended == 0

@@ -83,21 +83,23 @@ def poles_scene() -> Scene:
 
 SCENES = {"card before wall": card_scene, "slanted ground": ground_scene, "thin poles": poles_scene}
 
-FLOOR_DB = {"card before wall": 26.0, "slanted ground": 16.0, "thin poles": 29.0}
-"""Least PSNR on the disoccluded pixels per scene, a little under what the LDI reaches today."""
+FLOOR_DB = {"card before wall": 30.0, "slanted ground": 17.0, "thin poles": 30.0}
+"""Least PSNR on the disoccluded pixels per scene, a little under what the 3D photo reaches today
+(the issue's target is 30 dB; the slanted ground misses it, see docs/clean_3d_photos.md)."""
 
 BEFORE_DB = {
-    ("card before wall", "sideways"): 24.1, ("card before wall", "sideways-left"): 24.1,
-    ("card before wall", "vertical"): 24.2, ("card before wall", "vertical-up"): 24.2,
-    ("card before wall", "ken-burns corner"): 28.5,
-    ("slanted ground", "sideways"): 14.2, ("slanted ground", "sideways-left"): 15.4,
-    ("slanted ground", "vertical-up"): 17.0, ("slanted ground", "forward"): 23.8,
-    ("slanted ground", "ken-burns corner"): 14.6,
-    ("thin poles", "sideways"): 32.7, ("thin poles", "sideways-left"): 32.6,
-    ("thin poles", "forward"): 29.3, ("thin poles", "ken-burns corner"): 29.5,
+    ("card before wall", "sideways"): 27.3, ("card before wall", "sideways-left"): 27.3,
+    ("card before wall", "vertical"): 26.7, ("card before wall", "vertical-up"): 26.7,
+    ("card before wall", "ken-burns corner"): 37.3,
+    ("slanted ground", "sideways"): 23.3, ("slanted ground", "sideways-left"): 19.7,
+    ("slanted ground", "vertical-up"): 16.5, ("slanted ground", "forward"): 35.5,
+    ("slanted ground", "ken-burns corner"): 23.5,
+    ("thin poles", "sideways"): 40.2, ("thin poles", "sideways-left"): 39.4,
+    ("thin poles", "forward"): 29.8, ("thin poles", "ken-burns corner"): 30.7,
 }
-"""Disoccluded PSNR with the nearest-source hidden layer (Voronoi depth, ``cv2.inpaint`` colour),
-printed next to today's for comparison."""
+"""Disoccluded PSNR before silhouettes were blended by coverage (``PlainRenderSettings.blend_coverage``:
+a silhouette pixel then took the nearer surface's colour whole, so silhouettes grew by up to a
+pixel into the disoccluded strip), printed next to today's for comparison."""
 
 
 def camera(t) -> Cameras:
