@@ -17,7 +17,9 @@ i.e. its detail (measured on the held-out pairs of ``stylize3d bench quality``:
 sharpness 0.57x -> 0.89x the plain render, Lab distance 1.39x -> 1.97x the 2D
 network's, at strength 1 and before any training of the colour transform). Being a per-point recolouring it is the same
 in every view (consistent by construction) and keeps every edge of the photo;
-the learned model adds the style's texture and local colour on top.
+the learned model adds the style's texture and local colour on top. Colours
+that land outside the sRGB gamut keep their lightness and hue and lose chroma
+(:func:`gamut_map`) instead of being clipped channel by channel.
 
 The conversion is OpenCV's float sRGB <-> L*a*b* (D65), as
 :func:`~stylize3d_core.models.losses.rgb_to_lab`. No gradients flow through it:
@@ -79,6 +81,48 @@ def mix_stats(a: LabStats, b: LabStats, t: float) -> LabStats:
     return LabStats((1 - t) * a.mean + t * b.mean, (1 - t) * a.std + t * b.std)
 
 
+_LAB_WHITE = np.array([0.950456, 1.0, 1.088754], np.float32)  # D65, as OpenCV
+_XYZ_TO_LINEAR = np.array([[3.240479, -1.53715, -0.498535],
+                           [-0.969256, 1.875991, 0.041556],
+                           [0.055648, -0.204043, 1.057311]], np.float32)
+
+
+def _linear_rgb(lab: np.ndarray) -> np.ndarray:
+    """(n, 3) L*a*b* -> linear sRGB, unclipped (outside [0, 1] = out of the sRGB gamut)."""
+    fy = (lab[:, 0] + 16.0) / 116.0
+    f = np.stack([fy + lab[:, 1] / 500.0, fy, fy - lab[:, 2] / 200.0], axis=1)
+    d = 6.0 / 29.0
+    xyz = np.where(f > d, f**3, 3 * d * d * (f - 4.0 / 29.0)) * _LAB_WHITE
+    return xyz @ _XYZ_TO_LINEAR.T
+
+
+def gamut_map(lab: np.ndarray, steps: int = 8) -> np.ndarray:
+    """Bring L*a*b* colours (n, 3) into the sRGB gamut by reducing their chroma (a*, b*) only, keeping L*.
+
+    A transferred highlight or shadow can ask for a chroma that no sRGB colour has at
+    its lightness; clipping each RGB channel would then change its hue (a white rim
+    turning cyan). Here the chroma of such colours is scaled down, by bisection, to
+    the largest that fits (grey always fits).
+    """
+    out = lab.copy()
+    lin = _linear_rgb(out)
+    bad = np.flatnonzero(((lin < -1e-4) | (lin > 1.0 + 1e-4)).any(axis=1))
+    if bad.size == 0:
+        return out
+    sub = out[bad]
+    lo = np.zeros(bad.size, np.float32)  # scales known to fit
+    hi = np.ones(bad.size, np.float32)  # scales known not to
+    for _ in range(steps):
+        mid = (lo + hi) / 2
+        trial = np.concatenate([sub[:, :1], sub[:, 1:] * mid[:, None]], axis=1)
+        rgb = _linear_rgb(trial)
+        fits = ((rgb >= -1e-4) & (rgb <= 1.0 + 1e-4)).all(axis=1)
+        lo = np.where(fits, mid, lo)
+        hi = np.where(fits, hi, mid)
+    out[bad, 1:] = sub[:, 1:] * lo[:, None]
+    return out
+
+
 class ColourTransfer:
     """The points' colours (N, 3) in [0, 1], ready to be moved towards any style (see the module docstring).
 
@@ -106,6 +150,7 @@ class ColourTransfer:
         out = (self._lab - c.mean) * gain.astype(np.float32) + target.astype(np.float32)
         out[:, 0] = out[:, 0].clip(0.0, 100.0)
         out[:, 1:] = out[:, 1:].clip(-127.0, 127.0)
+        out = gamut_map(out)
         back = cv2.cvtColor(out.astype(np.float32).reshape(-1, 1, 3), cv2.COLOR_Lab2RGB).reshape(-1, 3)
         back = np.nan_to_num(back, nan=0.0).clip(0.0, 1.0)
         return torch.from_numpy(back).to(self.rgb.device)
@@ -116,4 +161,4 @@ def transfer_colours(rgb: torch.Tensor, style: LabStats, strength: float = 1.0) 
     return ColourTransfer(rgb)(style, strength)
 
 
-__all__ = ["ColourTransfer", "LabStats", "MAX_GAIN", "lab_stats", "mix_stats", "transfer_colours"]
+__all__ = ["ColourTransfer", "LabStats", "gamut_map", "MAX_GAIN", "lab_stats", "mix_stats", "transfer_colours"]

@@ -84,3 +84,29 @@ def test_mix_stats():
     m = mix_stats(a, b, 0.25)
     np.testing.assert_allclose(m.mean, 2.5)
     np.testing.assert_allclose(m.std, 1.5)
+
+
+def test_gamut_map_keeps_lightness_and_hue_and_fits_srgb():
+    from stylize3d_core.models.colour_transfer import _linear_rgb, gamut_map
+
+    g = np.random.default_rng(6)
+    lab = g.uniform([0, -127, -127], [100, 127, 127], (5000, 3)).astype(np.float32)
+    out = gamut_map(lab)
+    lin = _linear_rgb(out)
+    assert ((lin > -1e-3) & (lin < 1 + 1e-3)).all()  # every colour is an sRGB colour
+    np.testing.assert_array_equal(out[:, 0], lab[:, 0])  # lightness kept
+    chroma_in, chroma_out = np.hypot(lab[:, 1], lab[:, 2]), np.hypot(out[:, 1], out[:, 2])
+    assert (chroma_out <= chroma_in + 1e-4).all()
+    moved = chroma_out > 1.0
+    hue_in = np.arctan2(lab[moved, 2], lab[moved, 1])
+    hue_out = np.arctan2(out[moved, 2], out[moved, 1])
+    assert np.abs(np.angle(np.exp(1j * (hue_in - hue_out)))).max() < 1e-3  # hue kept
+    # in-gamut colours are untouched; our linear conversion matches OpenCV's
+    rgb = g.random((500, 1, 3)).astype(np.float32)
+    inside = _lab(rgb)
+    np.testing.assert_array_equal(gamut_map(inside), inside)
+    lin_ref = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4).reshape(-1, 3)
+    np.testing.assert_allclose(_linear_rgb(inside), lin_ref, atol=5e-3)
+    # a white rim asked to take a saturated hue stays (nearly) white, not cyan
+    white = gamut_map(np.array([[99.0, -40.0, -40.0]], np.float32))
+    assert np.hypot(white[0, 1], white[0, 2]) < 10.0
