@@ -8,7 +8,9 @@ what changes           what is recomputed                           typical cost
 =====================  ==========================================  ==================
 photo                  geometry (NDC, FPS, ball queries, 3-NN),     seconds
                        content features
-style                  style CNN features, AdaAttN                  < 1 s
+style                  style CNN features (kept for the last few    < 1 s
+                       style images: a new photo reuses them),
+                       AdaAttN
 second style / mix     (its features once) then a blend             ~0.1 s (at the next render)
 strength               blend + IDW upsampling to every point        ~0.1 s (at the next render)
 camera                 rasterize + U-Net decode                     see benchmarks
@@ -25,9 +27,12 @@ Thread use: an instance is not thread-safe; call it from one (worker) thread.
 
 from __future__ import annotations
 
+import hashlib
 import time
+import weakref
+from collections import OrderedDict
 from dataclasses import dataclass
-from typing import Callable, Dict, Iterator, List, Optional
+from typing import Callable, Dict, Iterator, List, Optional, Tuple
 
 import numpy as np
 import torch
@@ -37,7 +42,7 @@ from .errors import InputError, RenderInterrupted
 from .geometry.camera import Cameras
 from .models.adaattn import blend
 from .models.checkpoint import Checkpoint, load_checkpoint
-from .models.style_features import StyleEncoder
+from .models.style_features import StyleEncoder, StyleFeatures
 from .models.scene_geometry import SceneGeometry, prepare_geometry
 from .models.stylize3d import Stylize3DModel
 from .render.plain import StratifiedOrder, preview_point_count
@@ -73,6 +78,65 @@ def style_tensor(style_rgb: np.ndarray, name: str = "style image") -> torch.Tens
     if not np.isfinite(style_rgb).all():
         raise InputError(name, "contains NaN or infinite values")
     return torch.from_numpy(np.ascontiguousarray(style_rgb, dtype=np.float32)).permute(2, 0, 1)[None].clamp(0, 1)
+
+
+class StyleFeatureCache:
+    """The style CNN's features of the last ``size`` style images, so a new photo with the same style skips the CNN.
+
+    Keyed by the style tensor's shape and bytes (BLAKE2b) and the CPU autocast state (a bfloat16 autocast
+    gives other features). The cached :class:`StyleFeatures` are inference tensors that nothing modifies.
+    One cache per :class:`StyleEncoder` (:func:`style_feature_cache`), so every ``Stylized3DPhoto`` sharing
+    an encoder (the viewer's photos) shares its cache.
+    """
+
+    def __init__(self, encoder: StyleEncoder, size: int = 4) -> None:
+        if size < 1:
+            raise InputError("style cache size", f"must be >= 1, got {size!r}")
+        self.encoder = encoder
+        self.size = int(size)
+        self._entries: "OrderedDict[Tuple, StyleFeatures]" = OrderedDict()
+        self.hits = 0
+        self.misses = 0
+
+    @staticmethod
+    def key(style: torch.Tensor) -> Tuple:
+        x = style.detach().contiguous()
+        digest = hashlib.blake2b(x.numpy().tobytes(), digest_size=16).hexdigest()
+        return (tuple(x.shape), str(x.dtype), digest, torch.is_autocast_enabled("cpu"),
+                str(torch.get_autocast_dtype("cpu")))
+
+    def features(self, style: torch.Tensor) -> StyleFeatures:
+        """The encoder's features of ``style`` (1, 3, h, w), from the cache when this image was seen."""
+        k = self.key(style)
+        hit = self._entries.get(k)
+        if hit is not None:
+            self._entries.move_to_end(k)
+            self.hits += 1
+            return hit
+        self.misses += 1
+        with torch.inference_mode():
+            maps = self.encoder(style)
+        self._entries[k] = maps
+        while len(self._entries) > self.size:
+            self._entries.popitem(last=False)
+        return maps
+
+    def clear(self) -> None:
+        self._entries.clear()
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+
+_CACHES: "weakref.WeakKeyDictionary[StyleEncoder, StyleFeatureCache]" = weakref.WeakKeyDictionary()
+
+
+def style_feature_cache(encoder: StyleEncoder) -> StyleFeatureCache:
+    """The one :class:`StyleFeatureCache` of ``encoder`` (made at the first call, gone with the encoder)."""
+    cache = _CACHES.get(encoder)
+    if cache is None:
+        cache = _CACHES[encoder] = StyleFeatureCache(encoder)
+    return cache
 
 
 def _stop_hooks(decoder: torch.nn.Module, should_stop: Callable[[], bool]) -> List:
@@ -159,7 +223,7 @@ class Stylized3DPhoto:
         else:
             t0 = time.perf_counter()
             with torch.inference_mode():
-                maps = self._encoder()(style_tensor(style_rgb)).maps
+                maps = style_feature_cache(self._encoder()).features(style_tensor(style_rgb)).maps
                 self._stylized = self.model.stylizer.stylize(self._content, maps).float()  # (M, C), float32 after autocast
             self.timings["style"] = time.perf_counter() - t0
         self._dense = None
@@ -170,7 +234,8 @@ class Stylized3DPhoto:
             self._stylized2 = None
         else:
             with torch.inference_mode():
-                maps = self._encoder()(style_tensor(style_rgb, "second style image")).maps
+                second = style_tensor(style_rgb, "second style image")
+                maps = style_feature_cache(self._encoder()).features(second).maps
                 self._stylized2 = self.model.stylizer.stylize(self._content, maps).float()  # (M, C), as set_style
         self._dense = None
 
