@@ -216,3 +216,23 @@ def test_style_features_are_cached_per_encoder(stylized):
     assert small.misses == 4
     with pytest.raises(InputError):
         StyleFeatureCache(encoder, size=0)
+
+
+def test_final_points_per_pixel_keeps_a_prefix(stylized):
+    from dataclasses import replace
+
+    cam = Cameras.identity(stylized.photo.fov_y_deg)
+    before = stylized.settings
+    try:
+        full = stylized.render(cam, 12, 16)
+        stylized.settings = replace(before, final_points_per_pixel=100.0)  # more than there are: every point
+        np.testing.assert_array_equal(stylized.render(cam, 12, 16), full)
+        stylized.settings = replace(before, final_points_per_pixel=1.0, preview_points_per_pixel=1.0)
+        subset = stylized.render(cam, 12, 16)
+        # the same prefix as a preview of the same density (supersample 1), and not every point
+        np.testing.assert_array_equal(subset, stylized.render(cam, 12, 16, preview=True))
+        assert np.isfinite(subset).all() and not np.array_equal(subset, full)
+    finally:
+        stylized.settings = before
+    with pytest.raises(InputError):
+        StylizeSettings(final_points_per_pixel=0.1)
