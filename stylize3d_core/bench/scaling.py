@@ -47,6 +47,8 @@ def measure(megapixels: float, frames: Sequence[int], photo: Optional[str] = Non
     from ..geometry.camera import Cameras
     from .photos import photo_at_megapixels
 
+    import open3d.core  # noqa: F401 (the geometry's k-NN; imported before the clock starts, once per process)
+
     with tempfile.TemporaryDirectory() as tmp:
         path = photo_at_megapixels(megapixels, Path(tmp), photo)
         t0 = time.perf_counter()
@@ -100,7 +102,8 @@ def run_scaling(out: Path, quick: bool = False, show_progress: bool = False, log
                      "points (millions)", "stylized ms per frame", "scaling: time per frame vs points")
     write_table(Path(out), "scaling", "Scaling with photo and frame size", rows, cols, notes=growth + [
         "each photo size in a fresh process (peak_rss_gib is that process's peak, all frame sizes included); "
-        "photo3d_s: read + prior depth + LDI + points; model_s: geometry + encoding + style; "
+        "photo3d_s: read + prior depth + LDI + points; model_s: geometry + encoding + style (open3d.core "
+        "imported before); "
         f"{'one timed render' if quick else 'median of 3 renders'} after one warm-up per frame size" + (" (--quick preset)" if quick else "")])
     log(f"scaling: {len(rows)} rows")
     return rows
