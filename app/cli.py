@@ -99,8 +99,8 @@ BENCH_SUITES = ("speed", "consistency", "scaling", "stress", "skips", "targets",
 
 
 def _add_bench(sub: "argparse._SubParsersAction") -> None:
-    p = sub.add_parser("bench", help="measure speed against quality, consistency, scaling, skipped work; "
-                                     "run the numerical stress cases",
+    p = sub.add_parser("bench", help="measure speed against quality, the targets, the floor, consistency, "
+                                     "scaling, skipped work; run the numerical stress cases",
                        description="Write Markdown + JSON tables and PNG plots to --out "
                                    "(see stylize3d_core/bench/). Figures on a busy machine are pessimistic.")
     p.add_argument("suite", choices=BENCH_SUITES, help="what to measure")
