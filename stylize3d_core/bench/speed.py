@@ -83,8 +83,9 @@ class Variant:
 
     @property
     def final(self) -> bool:
-        """Applies to final frames (exports): every knob but the preview's point subset and the render scale."""
-        return self.preview_points_per_pixel is None and self.scale == 1.0
+        """Applies to final frames (exports): every knob but the render scale (a point budget is
+        ``StylizeSettings.final_points_per_pixel``, the same prefix of the point order as a preview's)."""
+        return self.scale == 1.0
 
 
 def variants(quick: bool) -> List[Variant]:
@@ -293,18 +294,43 @@ class Choice:
     target_db: float
 
 
+TIE = 1.15
+"""Times within this factor of the fastest count as a tie (noise on a shared machine): the lower error wins."""
+
+
 def choose(rows: Sequence[dict]) -> List[Choice]:
     """The fastest row within each use's error target: previews any knob at >= 30 dB; final frames and the
-    export default a knob that applies to final frames (``Variant.final``: no point subset, no render
-    scale) at >= 40 dB. bfloat16 and thread counts are not settings a user picks here, so they are left
-    out of the choice (their rows still show on the plot)."""
+    export default a knob that applies to final frames (every knob but the render scale) at >= 40 dB.
+    Rows within :data:`TIE` of the fastest count as equally fast and the one with the higher PSNR is
+    chosen. bfloat16 and thread counts are not settings a user picks here, so they are left out of the
+    choice (their rows still show on the plot)."""
     picks = []
     settable = [r for r in rows if r["knob"] not in ("bfloat16", "threads")]
     for use, target, final in (("viewer preview", PREVIEW_PSNR_DB, False), ("viewer final frame", FINAL_PSNR_DB, True),
                                ("export default", FINAL_PSNR_DB, True)):
-        ok = [r for r in settable if r["psnr_db"] >= target and (r["final"] or not final)]
-        best = min(ok, key=lambda r: r["ms_per_frame"])  # the reference (inf dB) is always there
-        picks.append(Choice(use, best["variant"], best["ms_per_frame"], best["psnr_db"], target))
+        ok = [r for r in settable if _db(r["psnr_db"]) >= target and (r["knob"] != "resolution" or not final)]
+        fastest = min(r["ms_per_frame"] for r in ok)  # the reference (inf dB) is always there
+        best = max((r for r in ok if r["ms_per_frame"] <= TIE * fastest), key=lambda r: _db(r["psnr_db"]))
+        picks.append(Choice(use, best["variant"], best["ms_per_frame"], _db(best["psnr_db"]), target))
+    return picks
+
+
+def _db(v) -> float:
+    """A PSNR from a row or its JSON ("inf" for identical frames)."""
+    return float(v)
+
+
+def write_choices(out: Path, rows: Sequence[dict], frame: Tuple[int, int]) -> List[Choice]:
+    """``speed_choices.md/json``: :func:`choose` of ``rows`` (those of ``speed.json`` will do)."""
+    H, W = frame
+    picks = choose(rows)
+    write_table(Path(out), "speed_choices", "Settings chosen from the speed sweep", [
+        {"use": c.use, "variant": c.variant, "ms_per_frame": c.ms_per_frame, "psnr_db": c.psnr_db,
+         "target_db": c.target_db} for c in picks], notes=[
+        f"the fastest row of speed.md at or above the target PSNR (frames {W}x{H}), times within {TIE:g}x of the "
+        "fastest counting as a tie won by the higher PSNR; final frames and the export default from every knob but "
+        "the render scale (a point budget: StylizeSettings.final_points_per_pixel); bfloat16 and thread counts are "
+        "not offered as settings"])
     return picks
 
 
@@ -342,13 +368,7 @@ def run_speed(out: Path, quick: bool = False, show_progress: bool = False, log: 
     out = Path(out)
     cols = ["variant", "knob", "ms_per_frame", "first_frame_s", "speedup", "psnr_db", "perceptual", "pareto", "finite",
             "timed_runs"]
-    picks = choose(rows)
-    write_table(out, "speed_choices", "Settings chosen from the speed sweep", [
-        {"use": c.use, "variant": c.variant, "ms_per_frame": c.ms_per_frame, "psnr_db": c.psnr_db,
-         "target_db": c.target_db} for c in picks], notes=[
-        f"the fastest row of speed.md at or above the target PSNR (frames {W}x{H}); final frames and the export "
-        "default only from knobs that apply to a full frame (no point subset, no render scale); bfloat16 and "
-        "thread counts are not offered as settings"])
+    picks = write_choices(out, rows, (H, W))
     write_table(out, "speed", "Speed against quality", rows, cols, notes=[
         f"photo {scene.photo3d.size[1]}x{scene.photo3d.size[0]} ({len(scene.photo3d.points):,} points), "
         f"frames {W}x{H}, {len(scene.cameras)} cameras of the circle trajectory, median of {preset.repeats} "

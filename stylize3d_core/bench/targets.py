@@ -13,7 +13,8 @@ style CNN loaded beforehand (not counted):
   cameras of the circle after one warm-up each;
 * the error of the preview against the full-quality float32 frame of the same camera and size,
   and of the export default (``RenderJob``'s settings) against the full-quality float32 frame;
-* the 90-frame 512-pixel MP4 of the circle trajectory (rendering and encoding, ``write_video``).
+* a full frame with the export default (``RenderJob``'s settings: ``points_per_pixel``) and the 90-frame
+  512-pixel MP4 of the circle trajectory with it (rendering and encoding, ``write_video``).
 
 A second process lifts a 4 MP photo and renders one 512-pixel stylized frame: its peak memory.
 """
@@ -116,7 +117,8 @@ def measure(megapixels: float, frame: int, preview: int, video_frames: int, rend
                         "full_ms": 1000 * float(np.median(full)), "preview_psnr_db": float(np.mean(prev_db))})
             # the export default (RenderJob's settings) against the full-quality float32 frame
             job = RenderJob()
-            export = StylizeSettings(strength=st.settings.strength, supersample=job.supersample)
+            export = StylizeSettings(strength=st.settings.strength, supersample=job.supersample,
+                                     final_points_per_pixel=job.points_per_pixel)
             reference = StylizeSettings(strength=st.settings.strength, supersample=1)
             final_db = []
             for k in range(2):
@@ -127,7 +129,14 @@ def measure(megapixels: float, frame: int, preview: int, video_frames: int, rend
                 final_db.append(min(_psnr(st.render(c, H, W), ref), 1e9))
             out["export_psnr_db"] = float(np.mean(final_db)) if max(final_db) < 1e9 else math.inf
             out["export_settings"] = repr(export)
-            t0 = time.perf_counter()
+            full_export = []
+            for k in range(renders):
+                c = cams[(7 * k + 3) % len(cams)]
+                s0 = time.perf_counter()
+                st.render(c, H, W)
+                full_export.append(time.perf_counter() - s0)
+            out["full_export_ms"] = 1000 * float(np.median(full_export))
+            t0 = time.perf_counter()  # the video with the export default (st.settings is export now)
             write_video(Path(tmp) / "video.mp4", st.frames(cams[:video_frames], H, W), fps=30,
                         n_frames=video_frames)
             out["video_s"] = time.perf_counter() - t0
@@ -168,8 +177,11 @@ def run_targets(out: Path, quick: bool = False, show_progress: bool = False, log
 
     rows = [
         row(f"stylized preview while orbiting, {Wp}x{Hp}", ">= 30 fps", fps, "fps", fps >= 30, "20 fps"),
-        row(f"stylized full frame {W}x{H}, {mp}", "<= 150 ms", one["full_ms"], "ms", one["full_ms"] <= 150, "357 ms"),
-        row(f"stylized {p.video_frames}-frame {W}x{H} MP4", "<= 15 s", one["video_s"], "s", one["video_s"] <= 15,
+        row(f"stylized full frame {W}x{H}, {mp}: every point", "<= 150 ms", one["full_ms"], "ms",
+            one["full_ms"] <= 150, "357 ms"),
+        row(f"the same with the export default ({p.frame}-px frames: RenderJob.points_per_pixel)", "<= 150 ms",
+            one["full_export_ms"], "ms", one["full_export_ms"] <= 150, "357 ms"),
+        row(f"stylized {p.video_frames}-frame {W}x{H} MP4 (export default)", "<= 15 s", one["video_s"], "s", one["video_s"] <= 15,
             "34.8 s"),
         row("photo + style -> first stylized frame", "<= 3 s", one["first_frame_s"], "s", one["first_frame_s"] <= 3,
             "4.8 s"),
