@@ -320,6 +320,14 @@ def _db(v) -> float:
     return float(v)
 
 
+def speed_plot(out: Path, rows: Sequence[dict]) -> Path:
+    """``speed.png``: PSNR against ms per frame (log), the Pareto front in red (rows of ``speed.json`` will do)."""
+    pts = [(float(r["ms_per_frame"]), min(_db(r["psnr_db"]), PSNR_CAP)) for r in rows]
+    return scatter_plot(Path(out) / "speed.png", pts, [r["variant"] for r in rows], "ms per frame (log)",
+                        "PSNR dB vs reference", "speed vs quality (red: Pareto front)", front=pareto_front(pts),
+                        log_x=True)
+
+
 def write_choices(out: Path, rows: Sequence[dict], frame: Tuple[int, int]) -> List[Choice]:
     """``speed_choices.md/json``: :func:`choose` of ``rows`` (those of ``speed.json`` will do)."""
     H, W = frame
@@ -379,8 +387,7 @@ def run_speed(out: Path, quick: bool = False, show_progress: bool = False, log: 
         "EfficientNet perceptual distance (0 = identical)",
         "first_frame_s: a new style (style CNN + AdaAttN) and the first frame; pareto: not beaten on both "
         f"ms per frame and PSNR (PSNR capped at {PSNR_CAP:g} dB)"])
-    scatter_plot(out / "speed.png", pts, [r["variant"] for r in rows], "ms per frame", "PSNR dB vs reference",
-                 "speed vs quality (red: Pareto front)", front=front)
+    speed_plot(out, rows)
     log(f"speed: {len(rows)} variants, frames {W}x{H}; " + "; ".join(f"{c.use}: {c.variant}" for c in picks))
     return rows
 
