@@ -57,7 +57,7 @@ QUICK = FloorPreset(megapixels=0.01, frame=64, conv_channels=64, conv_size=32, c
 @dataclass(frozen=True)
 class ConvWork:
     name: str
-    shape: str  # "Cin->Cout kxk at HxW"
+    shape: str  # "Cin->Cout kxk, out WxH"
     flops: float
     bytes: float
 
@@ -76,7 +76,7 @@ def decoder_work(decoder: torch.nn.Module, features: torch.Tensor, mask: torch.T
     def hook(module, inputs, output) -> None:
         x = inputs[0]
         kh, kw = module.kernel_size
-        work.append(ConvWork(names[module], f"{module.in_channels}->{module.out_channels} {kh}x{kw} at "
+        work.append(ConvWork(names[module], f"{module.in_channels}->{module.out_channels} {kh}x{kw}, out "
                              f"{output.shape[-1]}x{output.shape[-2]}", conv_flops(x, output, module),
                              4.0 * (x.numel() + output.numel() + module.weight.numel())))
 
