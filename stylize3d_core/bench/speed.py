@@ -256,10 +256,11 @@ class VariantRun:
 
 
 def measure_variants(scene: SpeedScene, vs: Sequence[Variant], repeats: int, warmup: int = 1,
-                     show_progress: bool = False) -> List[Tuple[List[np.ndarray], float, float]]:
+                     show_progress: bool = False, per_round: bool = False) -> List[tuple]:
     """(frames, seconds per frame, seconds to the first frame) of each variant, timed in interleaved rounds:
     every round times each variant once, so a change of load on a shared machine hits them all alike.
-    ``slow`` variants are timed in the first round only, without a warm-up."""
+    ``slow`` variants are timed in the first round only, without a warm-up. ``per_round``: each tuple
+    also holds the list of seconds per frame of every round."""
     from .suites import progress
 
     runs = [VariantRun(scene, v) for v in vs]
@@ -281,7 +282,7 @@ def measure_variants(scene: SpeedScene, vs: Sequence[Variant], repeats: int, war
             t2 = time.perf_counter()
         first_t[i].append(t1 - t0)
         frame_t[i].append((t2 - t1) / len(run.cameras))
-    return [(run.output(), statistics.median(ft), statistics.median(tt))
+    return [(run.output(), statistics.median(ft), statistics.median(tt)) + ((ft,) if per_round else ())
             for run, ft, tt in zip(runs, frame_t, first_t)]
 
 
@@ -497,7 +498,7 @@ def _skips(out: Path, scene: SpeedScene, s, preset: SpeedPreset, cam, log: Log) 
     flat3d = Photo3D.build(rgb, flat)
     rows.append({"change": "photo without depth edges", "skip": "no LDI inpainting (scene/ldi.py)",
                  "holds": not flat3d.ldi.inpainted, "with_skip_s": t_flat, "without_s": t_edges,
-                 "speedup": t_edges / t_flat, "max_abs_diff": 0.0})
+                 "speedup": t_edges / t_flat, "max_abs_diff": math.nan})
     cols = ["change", "skip", "holds", "with_skip_s", "without_s", "speedup", "max_abs_diff", "psnr_db"]
     write_table(Path(out), "skips", "Skipped work, measured", rows, cols, notes=[
         f"frames {W}x{H}; photo {rgb.shape[1]}x{rgb.shape[0]}; median of {r} run(s) (the rebuild: one run)",
