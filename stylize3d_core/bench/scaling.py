@@ -86,10 +86,17 @@ def run_scaling(out: Path, quick: bool = False, show_progress: bool = False, log
         done = subprocess.run(cmd, capture_output=True, text=True, cwd=root)
         if done.returncode != 0:
             rows.append({"photo_mp": mp, "photo": "failed", "points": 0, "frame": "-", "photo3d_s": math.nan,
-                         "model_s": math.nan, "geometry_s": math.nan, "encode_s": math.nan, "plain_ms": math.nan, "stylized_ms": math.nan,
-                         "stylized_ns_per_point": math.nan, "peak_rss_gib": math.nan, "error": done.stderr.strip().splitlines()[-1:]})
-            continue
-        rows.extend(json.loads(done.stdout.strip().splitlines()[-1]))
+                         "model_s": math.nan, "geometry_s": math.nan, "encode_s": math.nan, "plain_ms": math.nan,
+                         "stylized_ms": math.nan, "stylized_ns_per_point": math.nan, "peak_rss_gib": math.nan,
+                         "error": done.stderr.strip().splitlines()[-1:]})
+        else:
+            rows.extend(json.loads(done.stdout.strip().splitlines()[-1]))
+        _write(Path(out), rows, quick)  # after every photo size: a long run stopped early keeps what it measured
+    log(f"scaling: {len(rows)} rows")
+    return rows
+
+
+def _write(out: Path, rows: List[dict], quick: bool) -> None:
     cols = ["photo_mp", "photo", "points", "frame", "photo3d_s", "model_s", "geometry_s", "encode_s", "plain_ms",
             "stylized_ms", "stylized_ns_per_point", "peak_rss_gib"]
     growth = growth_notes(rows)
@@ -98,15 +105,14 @@ def run_scaling(out: Path, quick: bool = False, show_progress: bool = False, log
         from .report import scatter_plot
 
         pts = [(r["points"] / 1e6, r["stylized_ms"]) for r in ok]
-        scatter_plot(Path(out) / "scaling.png", pts, [f"{r['photo_mp']:g} MP {r['frame']}" for r in ok],
+        scatter_plot(out / "scaling.png", pts, [f"{r['photo_mp']:g} MP {r['frame']}" for r in ok],
                      "points (millions)", "stylized ms per frame", "scaling: time per frame vs points")
-    write_table(Path(out), "scaling", "Scaling with photo and frame size", rows, cols, notes=growth + [
+    write_table(out, "scaling", "Scaling with photo and frame size", rows, cols, notes=growth + [
         "each photo size in a fresh process (peak_rss_gib is that process's peak, all frame sizes included); "
         "photo3d_s: read + prior depth + LDI + points; model_s: geometry + encoding + style (open3d.core "
         "imported before); "
-        f"{'one timed render' if quick else 'median of 3 renders'} after one warm-up per frame size" + (" (--quick preset)" if quick else "")])
-    log(f"scaling: {len(rows)} rows")
-    return rows
+        f"{'one timed render' if quick else 'median of 3 renders'} after one warm-up per frame size"
+        + (" (--quick preset)" if quick else "")])
 
 
 def growth_notes(rows: Sequence[dict]) -> List[str]:
