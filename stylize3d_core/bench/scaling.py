@@ -101,12 +101,17 @@ def _write(out: Path, rows: List[dict], quick: bool) -> None:
             "stylized_ms", "stylized_ns_per_point", "peak_rss_gib"]
     growth = growth_notes(rows)
     ok = [r for r in rows if r["photo"] != "failed"]
+    out.mkdir(parents=True, exist_ok=True)
     if ok:
         from .report import scatter_plot
 
         pts = [(r["points"] / 1e6, r["stylized_ms"]) for r in ok]
         scatter_plot(out / "scaling.png", pts, [f"{r['photo_mp']:g} MP {r['frame']}" for r in ok],
                      "points (millions)", "stylized ms per frame", "scaling: time per frame vs points")
+        last = {r["photo_mp"]: r for r in ok}.values()  # a process's peak: after its largest frame
+        scatter_plot(out / "scaling_memory.png", [(r["points"] / 1e6, r["peak_rss_gib"]) for r in last],
+                     [f"{r['photo_mp']:g} MP" for r in last], "points (millions)", "peak GiB",
+                     "scaling: peak memory vs points")
     write_table(out, "scaling", "Scaling with photo and frame size", rows, cols, notes=growth + [
         "each photo size in a fresh process (peak_rss_gib is that process's peak, all frame sizes included); "
         "photo3d_s: read + prior depth + LDI + points; model_s: geometry + encoding + style (open3d.core "
