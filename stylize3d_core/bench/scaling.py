@@ -112,7 +112,8 @@ def _write(out: Path, rows: List[dict], quick: bool) -> None:
         scatter_plot(out / "scaling_memory.png", [(r["points"] / 1e6, r["peak_rss_gib"]) for r in last],
                      [f"{r['photo_mp']:g} MP" for r in last], "points (millions)", "peak GiB",
                      "scaling: peak memory vs points")
-    write_table(out, "scaling", "Scaling with photo and frame size", rows, cols, notes=growth + [
+    failed = [f"{r['photo_mp']:g} MP failed: {' '.join(r.get('error') or [])}" for r in rows if r["photo"] == "failed"]
+    write_table(out, "scaling", "Scaling with photo and frame size", rows, cols, notes=failed + growth + [
         "each photo size in a fresh process (peak_rss_gib is that process's peak, all frame sizes included); "
         "photo3d_s: read + prior depth + LDI + points; model_s: geometry + encoding + style (open3d.core "
         "imported before); "
