@@ -21,7 +21,7 @@ photo size, along an orbit drag of ``--frames`` camera positions:
   frames per second delivered while dragging (what the window would show, less
   its own redraw), the latency from mouse-down to the first new frame (also for
   a second drag started 0.3 s after the first, while the first rest's full frame
-  renders), the time from rest to the first full-quality frame (the half-size
+  renders), the time from rest to the first full-quality frame (the first
   level of a progressive full frame) and to the full-size one, and the colour
   jump between the last preview and the full frame (mean absolute per-channel
   difference of the means, in 8-bit levels, and mean absolute pixel
@@ -29,14 +29,29 @@ photo size, along an orbit drag of ``--frames`` camera positions:
   interleaved, ``--repeats`` drag pairs each, so their ratio is measured under
   the same machine load.
 
+* **window** (``--window``): the viewer itself, in its own process on a private
+  Xvfb, with the shipped model, on a photo of ``--megapixels`` (the sample
+  upscaled; default 1 MP) opened as a user opens it (``--max-size``, the
+  viewer's default 640, or 0 for the whole photo), driven with real XTest mouse
+  events: ``--repeats`` pairs of 1.5 s drags (mouse moves every 1/60 s), the
+  second one 0.3 s after the first, then a 3 s rest. From the window's own frame
+  log it reports the frames per second shown while dragging, the latency from
+  the XTest mouse-down to the first new frame on screen (first drag; second drag,
+  while the first rest's full frame renders), the time from the mouse-up to the
+  first full-quality frame (which size) and to the full-size frame, and the colour
+  jump between the last preview shown and the full-quality frame that replaces
+  it (mean absolute difference of the mean colours, and mean pixel difference, in
+  8-bit levels). These are the four figures of issue 13's "Done when".
+
 Both paths are measured: the plain 3D photo, and the stylized one through a
 model checkpoint (``--model``; default: the trained one if present, else an
 untrained lite model written to a temporary file, which costs the same time).
 The machine is shared, so the load average is printed with the figures.
 
 Run: ``python benchmarks/bench_viewer.py [--threads 1] [--frames 40]`` or
-``python benchmarks/bench_viewer.py --interactive [--megapixels 1.0] [--repeats 2]`` (it measures the
-checkout it is in).
+``python benchmarks/bench_viewer.py --interactive [--megapixels 1.0] [--repeats 2]`` or
+``python benchmarks/bench_viewer.py --window [--max-size 640] [--repeats 2]`` (needs Xvfb and libXtst;
+it measures the checkout it is in).
 """
 
 from __future__ import annotations
@@ -48,7 +63,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import List
+from typing import Dict, List, Tuple
 
 import torch
 
@@ -104,9 +119,8 @@ def adaptive(session: ViewerSession, cams, display, stylized: bool) -> None:
     report(f"adaptive preview (settles at {side} px)", tail)
 
 
-def _drag_session(model: str, megapixels: float, tmp: str, max_size: int = 0):
-    """A session on the sample upscaled to ``megapixels``, loaded as the viewer loads it with ``max_size``
-    (0: the whole photo)."""
+def big_sample(megapixels: float, tmp: str) -> Tuple[str, Tuple[int, int]]:
+    """The sample photo upscaled (bicubic) to ``megapixels``, written to ``tmp``: (path, (H, W))."""
     import cv2
     import numpy as np
 
@@ -118,9 +132,16 @@ def _drag_session(model: str, megapixels: float, tmp: str, max_size: int = 0):
     big = cv2.resize(rgb, (int(round(w * scale)), int(round(h * scale))), interpolation=cv2.INTER_CUBIC)
     path = str(Path(tmp) / "sample_big.png")
     save_image(path, np.clip(big, 0, 1))
+    return path, big.shape[:2]
+
+
+def _drag_session(model: str, megapixels: float, tmp: str, max_size: int = 0):
+    """A session on the sample upscaled to ``megapixels``, loaded as the viewer loads it with ``max_size``
+    (0: the whole photo)."""
+    path, big_hw = big_sample(megapixels, tmp)
     s = ViewerSession(model)
     s.load_style(str(SAMPLE_STYLE))
-    info = s.load_photo(PhotoSpec(path, "auto", max_size=max_size or max(big.shape[:2])))
+    info = s.load_photo(PhotoSpec(path, "auto", max_size=max_size or max(big_hw)))
     s.prepare_stylized()
     return s, info
 
@@ -202,8 +223,11 @@ def interactive(model: str, megapixels: float, full_side: int, tmp: str, max_siz
                 if r.preview:
                     state["times"].append((max(r.value.rendered_size), r.seconds))
                     state["side"] = choose_preview_long_side(state["times"], state["side"], settings)
-                elif scale >= 1.0 and progressive:
-                    machine.levels = refine_levels(r.seconds, settings.full_budget_s)
+                elif scale < 1.0:
+                    state["last_level"] = (scale, r.seconds)
+                elif progressive:
+                    machine.levels = refine_levels(r.seconds, settings.full_budget_s - settings.rest_delay_s,
+                                                   state.get("last_level"))
                 log.append((t, r.preview, r.value, version, scale))
                 if not moving and machine.settled:
                     break
@@ -265,6 +289,153 @@ def interactive(model: str, megapixels: float, full_side: int, tmp: str, max_siz
         worker.stop(timeout=10)
 
 
+def window_figures(stats: Dict[str, list], drags: List[Tuple[float, float, bool]]) -> Dict[str, List[float]]:
+    """The figures of the window run from the viewer's frame log ``stats`` (``ViewerWindow.stats``, times
+    in ``time.monotonic()``) and the drags sent ``(mouse-down, mouse-up, second drag of a pair)``."""
+    shown = sorted(stats["preview_shown"])
+    levels, fulls = sorted(stats["level_shown"]), sorted(stats["full_shown"])
+    out: Dict[str, List[float]] = {k: [] for k in ("fps", "first_ms", "second_first_ms", "sharp_s", "full_s")}
+    for i, (down, up, second) in enumerate(drags):
+        moving = [t for t in shown if down <= t <= up]
+        out["fps"].append(len(moving) / (up - down))
+        first = [t for t in shown + levels + fulls if t > down]
+        out["second_first_ms" if second else "first_ms"].append(1000 * (min(first) - down) if first else float("nan"))
+        if second:  # a long rest follows it
+            nxt = drags[i + 1][0] if i + 1 < len(drags) else float("inf")
+            sharp = [t - up for t in levels + fulls if up < t < nxt]
+            full = [t - up for t in fulls if up < t < nxt]
+            out["sharp_s"].append(min(sharp) if sharp else float("nan"))
+            out["full_s"].append(min(full) if full else float("nan"))
+    return out
+
+
+def window(model: str, megapixels: float, tmp: str, max_size: int, repeats: int, threads: int,
+           plain: bool = False) -> None:
+    """The viewer in its own process on Xvfb, driven with real XTest drags (see the module docstring)."""
+    import json
+    import multiprocessing
+
+    import numpy as np
+
+    from app.viewer.script import run_viewer_process
+    from app.viewer.xserver import start_xvfb, xtest_libs
+
+    screen = (1280, 800)
+    libs, server = xtest_libs(), start_xvfb(screen)
+    if libs is None or server is None:
+        print("window: needs Xvfb and libXtst (apt-get install xvfb libxtst6); skipped")
+        if server is not None:
+            server[0].terminate()
+        return
+    lx, lt = libs
+    xproc, display = server
+    path, big_hw = big_sample(megapixels, tmp)
+    script, report = Path(tmp) / "steps.json", Path(tmp) / "report.json"
+    drag_s, gap_s, rest_s = 1.5, 0.3, 3.0
+    script.write_text(json.dumps([
+        {"op": "wait_idle", "timeout": 600},
+        {"op": "grab_window", "path": str(Path(tmp) / "window.png")},
+        {"op": "sleep", "seconds": repeats * (2 * drag_s + gap_s + rest_s) + 2.0},  # the drags happen now
+        {"op": "wait_idle", "timeout": 120},
+        {"op": "quit"},
+    ]))
+    argv = [path, "--style", str(SAMPLE_STYLE), *(["--no-model"] if plain else ["--model", model]),
+            "--max-size", str(max_size or max(big_hw)),
+            "--threads", str(threads), "--size", f"{screen[0]}x{screen[1]}",
+            "--test-script", str(script), "--test-report", str(report)]
+    proc = multiprocessing.get_context("spawn").Process(target=run_viewer_process, args=(argv, display))
+    proc.start()
+    drags: List[Tuple[float, float, bool]] = []
+    try:
+        box = None
+        t_end = time.monotonic() + 600
+        while box is None and time.monotonic() < t_end and proc.is_alive():
+            try:
+                rep = json.loads(report.read_text())
+                box = next((s["result"]["box"] for s in rep["steps"] if s["op"] == "grab_window"), None)
+            except (OSError, ValueError, KeyError, TypeError):
+                pass
+            time.sleep(0.1)
+        if box is None:
+            print("window: the viewer did not open the photo")
+            return
+        x0, y0, x1, y1 = box
+        x, y = x0 + (x1 - x0) // 4, (y0 + y1) // 2
+        dpy = lx.XOpenDisplay(display.encode())
+        try:
+            def drag(dx: int) -> Tuple[float, float]:
+                lt.XTestFakeMotionEvent(dpy, -1, x, y, 0)
+                lx.XFlush(dpy)
+                time.sleep(0.05)
+                down = time.monotonic()
+                lt.XTestFakeButtonEvent(dpy, 1, 1, 0)
+                lx.XFlush(dpy)
+                n = int(drag_s * 60)
+                for i in range(1, n + 1):
+                    time.sleep(max(0.0, down + i / 60 - time.monotonic()))
+                    lt.XTestFakeMotionEvent(dpy, -1, x + dx * i, y, 0)
+                    lx.XFlush(dpy)
+                lt.XTestFakeButtonEvent(dpy, 1, 0, 0)
+                lx.XFlush(dpy)
+                return down, time.monotonic()
+
+            for _ in range(repeats):
+                drags.append((*drag(2), False))
+                time.sleep(gap_s)  # the first rest's full frame is rendering when the second drag starts
+                drags.append((*drag(-2), True))
+                time.sleep(rest_s)
+        finally:
+            lx.XCloseDisplay(dpy)
+        proc.join(300)
+        rep = json.loads(report.read_text())
+    finally:
+        if proc.is_alive():
+            proc.kill()
+            proc.join(10)
+        xproc.terminate()
+        xproc.wait(10)
+    stats = rep.get("stats") or {}
+    if not stats:
+        print(f"window: no frame log in the report (ok {rep.get('ok')}, errors {rep.get('errors')})")
+        return
+    fig = window_figures(stats, drags)
+    med = lambda v: float(np.nanmedian(v)) if len(v) and not np.all(np.isnan(v)) else float("nan")  # noqa: E731
+    rng = lambda v: f"{np.nanmin(v):.2f}-{np.nanmax(v):.2f}" if v else "-"  # noqa: E731
+    h, w = big_hw
+    loaded = max_size or max(big_hw)
+    side = stats.get("preview_sides", [])
+    print(f"window (Xvfb, real XTest drags, {'no model: the plain 3D photo' if plain else 'model ' + Path(model).name}"
+          f", torch threads {threads}): photo {w}x{h} "
+          f"({w * h / 1e6:.2f} MP) opened at long side {loaded}; {len(drags)} drags; load average "
+          f"{os.getloadavg()[0]:.1f}")
+    print(f"  frames shown while dragging: {med(fig['fps']):5.1f} fps median (range {rng(fig['fps'])})"
+          + (f", previews {min(side)}-{max(side)} px" if side else ""))
+    print(f"  mouse-down to first new frame: {med(fig['first_ms']):5.0f} ms (first drag), "
+          f"{med(fig['second_first_ms']):5.0f} ms (second drag 0.3 s after the first, while its full frame renders)")
+    sizes = stats.get("level_sizes", [])
+    full_sizes = stats.get("full_sizes", [])
+    print(f"  mouse-up to first full-quality frame: {med(fig['sharp_s']):5.2f} s median (range {rng(fig['sharp_s'])})"
+          + (f" at {sizes[-1][1]}x{sizes[-1][0]}" if sizes else ""))
+    print(f"  mouse-up to the full-size frame:      {med(fig['full_s']):5.2f} s median (range {rng(fig['full_s'])})"
+          + (f" at {full_sizes[-1][1]}x{full_sizes[-1][0]}" if full_sizes else ""))
+    jumps = stats.get("colour_jump", [])
+    for label, keep in (("first full-quality frame", lambda j: True),):
+        js = [j for j in jumps if keep(j)]
+        if js:
+            print(f"  colour jump last preview -> {label}: {med([j[1] for j in js]):.2f} levels mean colour, "
+                  f"{med([j[2] for j in js]):.1f} mean pixel difference ({len(js)} releases)")
+    print(f"  full renders interrupted by a new drag: {stats.get('interrupted', ['?'])[-1]}")
+    print(f"  where the time goes (medians): preview render {1000 * med(stats['preview_seconds']):.0f} ms on the worker, "
+          f"worker -> GUI thread hand-over {1000 * med(stats['post_delay']):.0f} ms, request -> shown "
+          f"{1000 * med(stats['preview_latency']):.0f} ms; {len(stats['drag_moves'])} mouse moves received "
+          f"of {sum(int(drag_s * 60) for _ in drags)} sent")
+    ticks = np.diff(sorted(stats.get("drag_ticks", [])))
+    ticks = ticks[ticks < 1.0]  # within a drag
+    if len(ticks):
+        print(f"  GUI loop while dragging: an iteration every {1000 * np.median(ticks):.0f} ms median "
+              f"(p90 {1000 * np.percentile(ticks, 90):.0f} ms): Open3D's event handling and redraw (llvmpipe)")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--threads", type=int, default=1, help="torch threads (the viewer's default is 1)")
@@ -275,10 +446,23 @@ def main() -> None:
     parser.add_argument("--model", default=None, help="checkpoint for the stylized path")
     parser.add_argument("--interactive", action="store_true", help="simulated drags through the live view's "
                         "worker and state machine (fps, latencies, colour jump)")
-    parser.add_argument("--megapixels", type=float, default=1.0, help="photo size of --interactive (default 1 MP)")
+    parser.add_argument("--window", action="store_true", help="the viewer window on Xvfb with real XTest drags "
+                        "(the four figures of issue 13)")
+    parser.add_argument("--plain", action="store_true", help="--window without the model (the plain 3D photo: "
+                        "what the window itself costs)")
+    parser.add_argument("--megapixels", type=float, default=1.0, help="photo size of --interactive and --window "
+                        "(default 1 MP)")
     parser.add_argument("--repeats", type=int, default=2, help="drag pairs per settings in --interactive (default 2)")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
+    from app.viewer import keep_freed_memory
+
+    keep_freed_memory()  # as the viewer does (its window process does it itself)
+    if args.window:
+        with tempfile.TemporaryDirectory() as tmp:
+            window(args.model or str(DEFAULT_MODEL), args.megapixels, tmp, args.max_size, args.repeats, args.threads,
+                   args.plain)
+        return
     if args.interactive:
         model = args.model or str(DEFAULT_MODEL)
         with tempfile.TemporaryDirectory() as tmp:

@@ -42,6 +42,7 @@ from .errors import InputError, RenderInterrupted
 from .geometry.camera import Cameras
 from .models.adaattn import blend
 from .models.checkpoint import Checkpoint, load_checkpoint
+from .models.colour_transfer import ColourTransfer, LabStats, lab_stats, mix_stats
 from .models.style_features import StyleEncoder, StyleFeatures
 from .models.scene_geometry import SceneGeometry, prepare_geometry
 from .models.stylize3d import Stylize3DModel
@@ -195,6 +196,9 @@ class Stylized3DPhoto:
         self._xyz = self._geom.xyz.index_select(0, self._order).contiguous()  # (N, 3), in self._order
         self._stylized: Optional[torch.Tensor] = None  # (M, C) at strength 1
         self._stylized2: Optional[torch.Tensor] = None  # (M, C) of the second style, at strength 1
+        self._style_stats: Optional[LabStats] = None  # colour statistics of the style (detail_transfer)
+        self._style_stats2: Optional[LabStats] = None
+        self._transfer: Optional[ColourTransfer] = None  # the points' colours, ready to recolour
         self._mix = 0.0
         self._dense: Optional[torch.Tensor] = None  # (N, Cr) in self._order
         self._strength = settings.strength
@@ -226,11 +230,13 @@ class Stylized3DPhoto:
         """Use a new style image (h, w, 3) float in [0, 1]; None removes the style."""
         if style_rgb is None:
             self._stylized = None
+            self._style_stats = None
         else:
             t0 = time.perf_counter()
             with torch.inference_mode():
                 maps = style_feature_cache(self._encoder()).features(style_tensor(style_rgb)).maps
                 self._stylized = self.model.stylizer.stylize(self._content, maps).float()  # (M, C), float32 after autocast
+            self._style_stats = lab_stats(style_rgb)
             self.timings["style"] = time.perf_counter() - t0
         self._dense = None
 
@@ -238,11 +244,13 @@ class Stylized3DPhoto:
         """A second style image to mix with the first (None removes it); see :meth:`set_mix`."""
         if style_rgb is None:
             self._stylized2 = None
+            self._style_stats2 = None
         else:
             with torch.inference_mode():
                 second = style_tensor(style_rgb, "second style image")
                 maps = style_feature_cache(self._encoder()).features(second).maps
                 self._stylized2 = self.model.stylizer.stylize(self._content, maps).float()  # (M, C), as set_style
+            self._style_stats2 = lab_stats(style_rgb)
         self._dense = None
 
     def set_mix(self, mix: float) -> None:
@@ -263,14 +271,20 @@ class Stylized3DPhoto:
     def _update_dense(self) -> None:
         t0 = time.perf_counter()
         with torch.inference_mode():
-            stylized = self._stylized
+            stylized, stats = self._stylized, self._style_stats
             if stylized is not None and self._stylized2 is not None and self._mix > 0.0:
                 stylized = torch.lerp(stylized, self._stylized2, self._mix)
+                stats = mix_stats(stats, self._style_stats2, self._mix)
+            colours = None
             if stylized is None or self._strength == 0.0:
                 sparse = self._content
             else:
                 sparse = blend(self._content, stylized, self._strength)
-            dense = self.model.dense_features(sparse, self._geom)  # (N, Cr)
+                if self.model.config.detail_transfer and stats is not None:
+                    if self._transfer is None:
+                        self._transfer = ColourTransfer(self._geom.rgb)
+                    colours = self._transfer(stats, self._strength)
+            dense = self.model.dense_features(sparse, self._geom, colours)  # (N, Cr)
             if not torch.isfinite(dense.sum()) and not torch.isfinite(dense).all():
                 raise InputError(self._checkpoint_name, "its weights make NaN or infinite features on this photo "
                                  "(the weights are finite but far too large: a diverged or corrupt checkpoint)")

@@ -236,3 +236,27 @@ def test_final_points_per_pixel_keeps_a_prefix(stylized):
         stylized.settings = before
     with pytest.raises(InputError):
         StylizeSettings(final_points_per_pixel=0.1)
+
+
+def test_detail_transfer_moves_the_frame_to_the_style_colours(stylized):
+    """A new lite model starts at the identity colour transform: a stylized frame shows the points' colours
+    moved to the style's L*a*b* statistics, scaled by the strength."""
+    from stylize3d_core.models.colour_transfer import lab_stats
+
+    assert stylized.model.config.detail_transfer and stylized.model.config.decoder.transform_channels == 3
+    cam = Cameras.identity(stylized.photo.fov_y_deg)
+    g = np.random.default_rng(5)
+    style = (np.array([0.8, 0.25, 0.1], np.float32) + 0.05 * g.standard_normal((40, 40, 3))).clip(0, 1)
+    target = lab_stats(style).mean
+    stylized.set_style(None)
+    base = lab_stats(stylized.render(cam, 48, 64)).mean
+    stylized.set_style(style.astype(np.float32))
+    try:
+        far = np.linalg.norm(base - target)
+        stylized.set_strength(1.0)
+        full = np.linalg.norm(lab_stats(stylized.render(cam, 48, 64)).mean - target)
+        stylized.set_strength(0.5)
+        half = np.linalg.norm(lab_stats(stylized.render(cam, 48, 64)).mean - target)
+    finally:
+        stylized.set_strength(1.0)
+    assert full < 0.1 * far and full < half < far

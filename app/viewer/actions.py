@@ -87,8 +87,9 @@ class Controller:
         self.window.show_error(what, error)
 
     def task_failed(self, name: str, e: BaseException) -> None:
-        """A worker task failed: clear the progress and show the error."""
-        self.window.set_busy(None, None)
+        """A worker task failed: clear the progress, say so in the status line (not what the task was doing:
+        "Building ..." would stay after the error dialog is gone) and show the error."""
+        self.window.set_busy(f"{name[:1].upper()}{name[1:]} failed; what was open is kept", None)
         self.window.show_error(name, e)
 
     def submit(self, name: str, fn: Callable[[], Any], on_done: Callable[[Any], None], key: Optional[str] = None) -> None:

@@ -49,9 +49,10 @@ SHORTCUTS: Tuple[Tuple[str, str], ...] = (
     ("E", "export a video"),
     ("P", "save a screenshot"),
     ("H or F1", "show / hide this help"),
-    ("Esc", "close the dialog, hide the help, stop the preview (never quits)"),
+    ("Esc", "close dialog / help, stop preview"),
+    ("", "(Esc never quits; an export goes on)"),
     ("Ctrl+Q", "quit (asks first during an export)"),
-    ("", "(arrows and + / - act after a click in the view)"),
+    ("", "(arrows, + / -: click the view first)"),
 )
 
 RECENT_PHOTOS = "Recent photos..."

@@ -28,12 +28,13 @@ once it rests, and any new camera change abandons a full frame in progress.
 **Progressive full frames.** Where a full frame takes long (the U-Net decoder's
 cost grows with the pixel count: ~1.5-2.5 s at 768x512 on a shared 2-core CPU),
 RESTING renders it in *levels* (:attr:`RenderStateMachine.levels`, fractions of
-the full size, e.g. ``(0.5, 1.0)``): the half-size frame through the same
-decoder and every point -- sharp, with the final frame's colours -- in about a
-quarter of the time, then the full one. :meth:`RenderStateMachine.shown` says
+the full size, e.g. ``(0.25, 1.0)``): the smaller frame through the same
+decoder and every point -- sharp, with the final frame's colours -- in a
+fraction of the time, then the full one. :meth:`RenderStateMachine.shown` says
 when the next level is due; only the last level settles the view, and a change
 at any level interrupts it. :func:`refine_levels` chooses the levels from the
-last full frame's time.
+last full frame's and the last first level's times: the first level is as large
+(1/4 to 1/2 of the size) as fits the budget of a sharp frame after the rest.
 
 ``version`` counts changes; a frame rendered for an older version is out of
 date and never settles the view. Runs on the GUI main thread only (no locks).
@@ -70,18 +71,49 @@ class Change(NamedTuple):
 
 
 PROGRESSIVE_LEVELS: Tuple[float, ...] = (0.5, 1.0)
-"""The levels of a progressive full frame: half size first, then the full size."""
+"""The levels of a progressive full frame before anything is measured: half size first, then the full size."""
+
+FIRST_LEVEL_RANGE: Tuple[float, float] = (0.25, 0.5)
+"""The size fractions the first level of a progressive full frame may take (:func:`refine_levels`)."""
 
 
-def refine_levels(last_full_s: Optional[float], budget_s: float = 0.5) -> Tuple[float, ...]:
-    """The levels of the next full frame: :data:`PROGRESSIVE_LEVELS` when a full frame takes longer than
-    ``budget_s`` (or its time is not known yet), else the full size at once (``(1.0,)``).
+def level_cost_model(full: Tuple[float, float], level: Tuple[float, float]) -> Optional[Tuple[float, float]]:
+    """``(a, b)`` of ``seconds ~ a + b * scale**2`` through two measured frames ``(scale, seconds)``: the
+    full frame and a level. ``a`` is what every full-quality frame costs whatever its size (rasterizing
+    every point), ``b`` the per-pixel part (the decoder). None when the two do not give a usable fit."""
+    (s1, t1), (s2, t2) = full, level
+    if not all(math.isfinite(v) for v in (s1, t1, s2, t2)) or abs(s1 * s1 - s2 * s2) < 1e-6:
+        return None
+    b = (t1 - t2) / (s1 * s1 - s2 * s2)
+    a = t1 - b * s1 * s1
+    if b <= 0.0:
+        return None
+    return max(0.0, a), b
 
-    A half-size level costs about a quarter of the full frame (the decoder is per pixel), so it is worth
-    it only where the full frame itself misses the budget of a sharp frame after the rest."""
-    if last_full_s is None or not math.isfinite(last_full_s) or last_full_s > budget_s:
+
+def refine_levels(last_full_s: Optional[float], budget_s: float = 0.5,
+                  last_level: Optional[Tuple[float, float]] = None) -> Tuple[float, ...]:
+    """The levels of the next full frame.
+
+    ``(1.0,)`` (the full size at once) when the last full frame took at most ``budget_s``; else two
+    levels, a first one then the full size. The first level's scale is the largest in
+    :data:`FIRST_LEVEL_RANGE` (in steps of 1/16) whose predicted time fits ``budget_s`` under
+    :func:`level_cost_model` of the last full frame and ``last_level`` (``(scale, seconds)`` of the last
+    first level); the smallest one when none fits, and 0.5 (:data:`PROGRESSIVE_LEVELS`) while nothing is
+    measured. A first level always costs the rasterization of every point, so it is worth it only where
+    the full frame itself misses the budget."""
+    if last_full_s is None or not math.isfinite(last_full_s):
         return PROGRESSIVE_LEVELS
-    return (1.0,)
+    if last_full_s <= budget_s:
+        return (1.0,)
+    lo, hi = FIRST_LEVEL_RANGE
+    model = None if last_level is None else level_cost_model((1.0, last_full_s), last_level)
+    if model is None:  # only the full frame is known: a frame costs ~ its pixels
+        model = (0.0, last_full_s)
+    a, b = model
+    steps = [k / 16 for k in range(int(round(hi * 16)), int(round(lo * 16)) - 1, -1)]
+    first = next((s for s in steps if a + b * s * s <= budget_s), steps[-1])
+    return (first, 1.0)
 
 
 class RenderStateMachine:

@@ -169,7 +169,7 @@ class ScriptRunner:
 
     def _rest_timings(self) -> Dict[str, Any]:
         """Seconds from the end of the last ``orbit`` step to the first full-quality frame shown after it
-        (the half-size level of a progressive full frame, or the full one) and to the full-size frame."""
+        (the first level of a progressive full frame, or the full one) and to the full-size frame."""
         end = getattr(self, "_orbit_end", None)
         if end is None:
             return {}
@@ -455,7 +455,7 @@ class ScriptRunner:
 
     def op_timings(self) -> Dict[str, Any]:
         """Medians (ms) of the window's render timings so far: preview render, hand-over to the main thread
-        (``post_delay``), request to display (``preview_latency``), the half-size and full-size full frames;
+        (``post_delay``), request to display (``preview_latency``), the first level and the full-size full frames;
         and how many full renders were interrupted."""
         def med(values) -> Optional[float]:
             return None if not values else round(1000.0 * sorted(values)[len(values) // 2], 1)

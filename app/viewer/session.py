@@ -95,6 +95,16 @@ def display_image(rgb: np.ndarray, display_hw: Tuple[int, int]) -> np.ndarray:
     return np.ascontiguousarray(u8)
 
 
+def colour_jump(before: np.ndarray, after: np.ndarray) -> Tuple[float, float]:
+    """How much the view changes from ``before`` to ``after`` (two (H, W, 3) uint8 frames of one size):
+    the mean absolute difference of their per-channel mean colours, and the mean absolute pixel
+    difference, both in 8-bit levels."""
+    if before.shape != after.shape:
+        raise InputError("colour jump", f"image shapes differ: {before.shape} and {after.shape}")
+    a, b = before.astype(np.float32), after.astype(np.float32)
+    return float(np.abs(a.mean((0, 1)) - b.mean((0, 1))).mean()), float(np.abs(a - b).mean())
+
+
 def split_view(before: np.ndarray, after: np.ndarray, fraction: float) -> np.ndarray:
     """Before / after comparison of two (H, W, 3) images: ``before`` left of ``fraction`` of the width,
     ``after`` right of it, and a 1-pixel light line at the split (none at 0 or 1)."""

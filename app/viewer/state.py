@@ -90,8 +90,9 @@ class PreviewSettings:
         target_preview_s: time budget of rendering one preview frame. Default 0.035: with the
             hand-over to the GUI thread, a frame every ~1/24 s while dragging (>= 24 fps where the
             display keeps up).
-        rest_delay_s: the camera must rest this long before the full frame is rendered. Default 0.15.
-        full_budget_s: a full frame slower than this is rendered progressively, half size first
+        rest_delay_s: the camera must rest this long before the full frame is rendered. Default 0.1.
+        full_budget_s: seconds from the rest to a sharp frame: a full frame slower than this (less the
+            rest delay) is rendered progressively, a smaller level first, as large as fits
             (:func:`~app.viewer.render_state.refine_levels`). Default 0.5.
     """
 
@@ -100,7 +101,7 @@ class PreviewSettings:
     max_preview_long_side: int = 384
     full_long_side: int = 768
     target_preview_s: float = 0.035
-    rest_delay_s: float = 0.15
+    rest_delay_s: float = 0.1
     full_budget_s: float = 0.5
 
     def __post_init__(self) -> None:

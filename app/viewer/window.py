@@ -47,8 +47,8 @@ from . import panel as P
 from .actions import CameraPathController, ExportController, PhotoController, ui_callback
 from .applications import ApplicationsController
 from .orbit import HOME, OrbitLimits, apply_drag, apply_wheel, orbit
-from .session import NO_MODEL, ViewerSession, ViewFrame
-from .render_state import RenderStateMachine, refine_levels
+from .session import NO_MODEL, ViewerSession, ViewFrame, colour_jump
+from .render_state import RenderPhase, RenderStateMachine, refine_levels
 from .state import (
     PREVIEW_SAMPLES, VIEWER_MAX_SIZE, PreviewSettings, ViewState, choose_preview_long_side, clamp_state_pose,
     full_frame_size, resolve_open_path, resolve_typed_path, shows_stylized, view_camera, view_fov, wheel_ticks,
@@ -119,9 +119,12 @@ class ViewerWindow:
         self.errors: List[str] = []
         self.stats: Dict[str, Any] = {"preview_seconds": [], "full_seconds": [], "full_latency": [], "preview_shown": [],
                                       "preview_latency": [], "post_delay": [], "mouse_down": [],
-                                      "drag_moves": [], "full_shown": [], "level_seconds": [], "level_shown": []}
+                                      "drag_moves": [], "full_shown": [], "level_seconds": [], "level_shown": [],
+                                      "colour_jump": [], "preview_sides": [], "level_sizes": [], "full_sizes": [],
+                                      "interrupted": [], "drag_ticks": []}
         self.script_thread: Optional[threading.Thread] = None
         self._preview_side = self.preview.preview_long_side
+        self._last_level: Optional[Tuple[float, float]] = None  # (scale, seconds) of the last first level
         self._preview_times: deque = deque(maxlen=PREVIEW_SAMPLES)  # (long side, seconds) of the last previews
         self._display_hw: Tuple[int, int] = (0, 0)
         self._shown_generation = 0
@@ -233,7 +236,7 @@ class ViewerWindow:
         self.image.frame = gui.Rect(r.x, r.y, max(1, r.width - pw), r.height)
         p.root.frame = gui.Rect(r.get_right() - pw, r.y, pw, max(1, r.height - sh))
         p.status_box.frame = gui.Rect(r.get_right() - pw, r.get_bottom() - sh, pw, sh)
-        hw, hh = int(min(30 * em, r.width - pw)), int(min(29 * em, r.height))
+        hw, hh = int(min(30 * em, r.width - pw)), int(min(33 * em, r.height))
         p.help.frame = gui.Rect(r.x + (r.width - pw - hw) // 2, r.y + (r.height - hh) // 2, hw, hh)
         self._update_display_size()
 
@@ -257,6 +260,12 @@ class ViewerWindow:
             self.state = clamp_state_pose(self.state, info.scene, self.limits)
         self._display_hw = (0, 0)
         self._update_display_size()
+
+    @property
+    def full_render_budget_s(self) -> float:
+        """What a full-quality frame (or the first level of one) may take: the budget from rest to a sharp
+        frame (``PreviewSettings.full_budget_s``) less the rest delay that comes before it."""
+        return max(0.05, self.preview.full_budget_s - self.preview.rest_delay_s)
 
     @property
     def display_hw(self) -> Tuple[int, int]:
@@ -502,9 +511,10 @@ class ViewerWindow:
         cancel = None if preview or camera is not None else threading.Event()
         stop = None if cancel is None else cancel.is_set
 
-        def render() -> ViewFrame:
-            return session.render_view(cam, size, display, preview=preview, stylized=stylized, should_stop=stop,
-                                       split=split, calibrate=scale >= 1.0)
+        def render() -> Tuple[ViewFrame, o3d.geometry.Image]:  # (on the worker: the GUI thread only shows it)
+            frame = session.render_view(cam, size, display, preview=preview, stylized=stylized, should_stop=stop,
+                                        split=split, calibrate=scale >= 1.0)
+            return frame, o3d.geometry.Image(frame.image)
 
         def interrupted() -> None:
             self._post(lambda: self.scheduler.full_interrupted(version))
@@ -521,9 +531,12 @@ class ViewerWindow:
         if res.generation <= self._shown_generation:
             return
         self._shown_generation = res.generation
-        frame: ViewFrame = res.value
-        self.image.update_image(o3d.geometry.Image(frame.image))
+        frame, image = res.value  # (ViewFrame, its Open3D image made on the worker)
+        self.image.update_image(image)
         self.window.post_redraw()
+        if not res.preview and self._shown is not None and self._shown.preview and \
+                self._shown.image.shape == frame.image.shape:  # what the user sees change on release
+            self.stats["colour_jump"].append([scale, *colour_jump(self._shown.image, frame.image)])
         self._shown = frame
         next_level = self.scheduler.shown(version, res.preview, scale)
         self.paths.frame_shown()
@@ -539,19 +552,24 @@ class ViewerWindow:
             st["preview_latency"].append(latency)
             st["preview_seconds"].append(res.seconds)
             st["preview_shown"].append(time.monotonic())
+            st["preview_sides"].append(max(frame.rendered_size))
             self._preview_times.append((max(frame.rendered_size), res.seconds))
             self._preview_side = choose_preview_long_side(self._preview_times, self._preview_side, self.preview)
         elif scale < 1.0:
+            self._last_level = (scale, res.seconds)
             st["level_seconds"].append(res.seconds)
             st["level_shown"].append(time.monotonic())
+            st["level_sizes"].append(list(frame.rendered_size))
         else:
             st["full_seconds"].append(res.seconds)
             st["full_shown"].append(time.monotonic())
+            st["full_sizes"].append(list(frame.rendered_size))
             st["full_latency"].append(latency)
-            self.scheduler.levels = refine_levels(res.seconds, self.preview.full_budget_s)  # for the next rest
+            self.scheduler.levels = refine_levels(res.seconds, self.full_render_budget_s, self._last_level)  # next rest
+        st["interrupted"] = [self.worker.interrupted]
         for value in st.values():
             if isinstance(value, list):
-                del value[:-200]
+                del value[:-2000]
         self._update_fps_label()
 
     def _update_fps_label(self) -> None:
@@ -560,8 +578,8 @@ class ViewerWindow:
         if st["preview_seconds"]:
             ms = 1000.0 * float(np.median(st["preview_seconds"][-10:]))
             text = f"preview {ms:.0f} ms @ {self._preview_side} px"
-        if st["level_seconds"] and self.scheduler.levels != (1.0,):
-            text += f"; half {st['level_seconds'][-1]:.2f} s"
+        if st["level_seconds"] and st["level_sizes"] and self.scheduler.levels != (1.0,):
+            text += f"; {max(st['level_sizes'][-1])} px {st['level_seconds'][-1]:.2f} s"
         if st["full_seconds"]:
             text += f"; full {st['full_seconds'][-1]:.2f} s"
         self.panel.fps_label.text = text
@@ -577,6 +595,8 @@ class ViewerWindow:
         if self._closing:
             return False
         now = time.monotonic()
+        if self._drag is not None:  # the GUI loop's rate while dragging (the bench reports it)
+            self.stats["drag_ticks"].append(now)
         if self._close_pending is not None and now - self._close_pending >= CLOSE_GRACE_S:
             self._close_pending = None  # no Esc followed: the user closed the window
             self.quit()
@@ -601,6 +621,8 @@ class ViewerWindow:
                 return gui.Widget.EventCallbackResult.CONSUMED
             self._last_click = (now, e.x, e.y)
             self.stats["mouse_down"].append(now)
+            if self.scheduler.rendering_full:  # a drag is about to start: free the worker for its first preview
+                self.worker.interrupt_render()  # (a click without a drag renders the full frame again)
             pan = (e.is_button_down(gui.MouseButton.RIGHT) or e.is_button_down(gui.MouseButton.MIDDLE)
                    or e.is_modifier_down(gui.KeyModifier.SHIFT))
             self._drag = ["pan" if pan else "orbit", e.x, e.y]
@@ -613,6 +635,9 @@ class ViewerWindow:
             return gui.Widget.EventCallbackResult.CONSUMED
         if e.type == T.BUTTON_UP:
             self._drag = None
+            if self.scheduler.phase is RenderPhase.MOVING and self.state.playback is None and \
+                    not self.worker.render_waiting():  # the release is the rest: the full frame now (not
+                self.request_render(preview=False)  # when the final pose's preview still waits: it goes first)
             return gui.Widget.EventCallbackResult.CONSUMED
         if e.type == T.WHEEL:
             self.wheel(wheel_ticks(e.wheel_dy, self.options.invert_wheel))

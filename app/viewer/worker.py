@@ -202,6 +202,11 @@ class ComputeWorker:
                 return True
             return False
 
+    def render_waiting(self) -> bool:
+        """True while a render request waits for its turn (not started)."""
+        with self._cv:
+            return self._render is not None
+
     def is_idle(self) -> bool:
         """True when nothing runs and nothing waits."""
         with self._cv:

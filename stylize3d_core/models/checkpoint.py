@@ -3,13 +3,14 @@
 A checkpoint is one ``.safetensors`` file. Its metadata holds::
 
     format   "stylize3d-model"
-    version  "3"
+    version  "4"
     config   the ModelConfig as JSON (so the file alone rebuilds the model)
     stage    "1" (view synthesis) or "2" (stylization)
     info     free JSON: iterations, data, command, hours...
 
-Version "2" files have no detail path (``detail_channels`` 0; it was added in
-version 3). Version "1" files are still read too: their
+Version "3" files have no colour transform (``decoder.transform_channels`` 0)
+nor colour transfer (``detail_transfer`` False), both added in version 4, version "2" files no detail path either
+(``detail_channels`` 0; added in version 3). Version "1" files are still read too: their
 config kept the neighbourhood settings (k, radii, down-sampling, FPS start)
 inside ``encoder`` and the subset size as ``encoder_max_points``;
 :func:`config_from_json` maps them to ``neighbourhood``, with the settings that
@@ -39,8 +40,8 @@ from .scene_geometry import NeighbourhoodConfig
 from .stylize3d import ModelConfig, Stylize3DModel
 
 FORMAT = "stylize3d-model"
-VERSION = "3"
-READABLE_VERSIONS = ("1", "2", "3")
+VERSION = "4"
+READABLE_VERSIONS = ("1", "2", "3", "4")
 _V1_NEIGHBOURHOOD = ("k", "stem_radius", "stage_radii", "downsample", "fps_start")
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -86,6 +87,7 @@ def config_from_json(text: str, source: PathLike, version: str = VERSION) -> Mod
         return ModelConfig(
             name=d["name"], encoder=enc, neighbourhood=hood, stylizer=sty, raster_channels=int(d["raster_channels"]),
             decoder=dec, detail_channels=int(d.get("detail_channels", 0)),
+            detail_transfer=bool(d.get("detail_transfer", False)),
         )
     except (ValueError, KeyError, TypeError, AttributeError) as e:
         raise InputError(source, f"the checkpoint's model configuration is unreadable ({e})") from None

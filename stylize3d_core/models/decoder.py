@@ -12,6 +12,22 @@ Layout (as in the paper's public code: 2 levels, no normalisation layers)::
         y = relu(conv3x3([y | skip_i]))
     rgb = sigmoid(conv1x1(relu(conv3x3(y))))      (B, 3, H, W), in (0, 1)
 
+**Colour transform** (``transform_channels`` = 3): the last three input
+feature channels are the points' own colours ``d`` (the model's detail path).
+A 1x1 convolution of the coarsest level ``x_levels`` predicts, per pixel, a
+3 x 3 matrix ``A`` and an offset ``b``, upsampled bilinearly to full resolution
+(a smooth field), and wherever points cover the pixel (coverage ``m``)::
+
+    out = clamp(rgb + m * (A (d - rgb) + b), 0, 1)
+
+so ``A = I, b = 0`` renders the points' colours exactly (sharp, and consistent
+from view to view by construction), ``A = 0, b = 0`` is the plain U-Net output,
+and in between the decoder recolours the full-resolution detail with a
+locally varying colour transform while it paints texture into ``rgb``. Holes
+(``m = 0``) keep the U-Net's inpainting. A new decoder starts at the identity;
+:func:`~stylize3d_core.models.stylize3d.add_colour_transform` can also add a zero
+head to a trained model, leaving its output unchanged.
+
 The full-resolution layers are narrow (``width / 4`` channels for 2 levels);
 the ``width``-channel layers run at 1/2 and 1/4 resolution.
 
@@ -29,19 +45,34 @@ average) and takes the mean mask as the coverage channel, then decodes at
 <= 0.5 s, 256^2 preview <= 0.1 s on 2 cores; ``benchmarks/bench_decoder.py``).
 Run it under ``torch.inference_mode()``; with ``channels_last`` (default) the
 weights and activations use NHWC, which oneDNN convolves fastest on CPU.
+
+**Stopping** (``forward(..., should_stop=)``, the viewer's full frames): a
+768x512 frame takes ~1-2 s on one CPU thread, its largest single layer ~0.25 s.
+With ``should_stop`` every convolution runs in horizontal strips of output rows
+(:func:`conv_in_strips`, each strip reads the input rows its kernel reaches: the
+1-row halo of a 3x3 convolution, zero padding only at the image's own edges) of at
+most :data:`STRIP_MACS` multiply-adds, ~10-20 ms, and ``should_stop()`` is checked
+before each strip; True stops with :class:`~stylize3d_core.errors.RenderInterrupted`.
+The strips give the unstripped result up to float rounding (within 1e-6,
+``tests/models/test_decoder_interrupt.py``). Without ``should_stop`` nothing changes.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import List, Tuple
+from typing import Callable, List, Optional, Tuple
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
 from ..checks import check_finite
-from ..errors import InputError
+from ..errors import InputError, RenderInterrupted
+
+StopCheck = Optional[Callable[[], bool]]
+
+STRIP_MACS = 120_000_000
+"""Multiply-adds per strip of :func:`conv_in_strips` (~10-20 ms on one CPU thread)."""
 
 
 @dataclass(frozen=True)
@@ -58,6 +89,12 @@ class DecoderConfig:
         supersample: inputs come at (2H, 2W) and are mask-weighted-averaged to
             (H, W) before decoding (see the module docstring). Default False.
         channels_last: keep weights/activations in NHWC (faster on CPU). Default True.
+        transform_channels: 0, or 3: the last 3 feature channels are RGB colours that the
+            colour-transform head recolours (see the module docstring). Default 0.
+        transform_gain: the head sees its input scaled by this: with Adam, whose steps are about
+            the learning rate per weight whatever the gradient, a gain of 1 / width keeps each step's
+            change of the colour matrix near the learning rate instead of ``width`` times it (the
+            presets use 1 / width; 1.0 is the layout of the first checkpoints with the transform).
     """
 
     in_channels: int = 256
@@ -66,8 +103,17 @@ class DecoderConfig:
     negative_slope: float = 0.2
     supersample: bool = False
     channels_last: bool = True
+    transform_channels: int = 0
+    transform_gain: float = 1.0
 
     def __post_init__(self) -> None:
+        if not 0.0 < self.transform_gain <= 1.0:
+            raise InputError("DecoderConfig.transform_gain", f"must be in (0, 1], got {self.transform_gain!r}")
+        if self.transform_channels not in (0, 3):
+            raise InputError("DecoderConfig.transform_channels", f"must be 0 or 3, got {self.transform_channels!r}")
+        if self.transform_channels and self.in_channels <= self.transform_channels:
+            raise InputError("DecoderConfig.transform_channels", f"needs in_channels > {self.transform_channels} "
+                             f"(learned features before the colours), got {self.in_channels}")
         if self.in_channels < 1:
             raise InputError("DecoderConfig.in_channels", f"must be >= 1, got {self.in_channels}")
         if self.levels < 1:
@@ -80,12 +126,13 @@ class DecoderConfig:
             raise InputError("DecoderConfig.negative_slope", f"must be in [0, 1), got {self.negative_slope}")
 
     @classmethod
-    def paper(cls, in_channels: int = 256, supersample: bool = False) -> "DecoderConfig":
+    def paper(cls, in_channels: int = 256, supersample: bool = False, transform_channels: int = 0) -> "DecoderConfig":
         """The public code's decoder: width 256, 2 levels (seconds per 512^2 frame on a CPU)."""
-        return cls(in_channels=in_channels, width=256, levels=2, supersample=supersample)
+        return cls(in_channels=in_channels, width=256, levels=2, supersample=supersample,
+                   transform_channels=transform_channels, transform_gain=1.0 / 256)
 
     @classmethod
-    def lite(cls, in_channels: int = 64, supersample: bool = False) -> "DecoderConfig":
+    def lite(cls, in_channels: int = 64, supersample: bool = False, transform_channels: int = 0) -> "DecoderConfig":
         """CPU decoder for the viewer: width 96 (24 channels at full resolution), 2 levels.
 
         Chosen with ``benchmarks/bench_decoder.py`` (C_in = 64, widths 64/96/128/192,
@@ -94,7 +141,8 @@ class DecoderConfig:
         width 96 took ~230-290 ms at 512^2 and ~37-52 ms at 256^2 in quiet runs,
         width 128 ~340 ms at 512^2 at best (no headroom).
         """
-        return cls(in_channels=in_channels, width=96, levels=2, supersample=supersample)
+        return cls(in_channels=in_channels, width=96, levels=2, supersample=supersample,
+                   transform_channels=transform_channels, transform_gain=1.0 / 96)
 
 
 def pad_to_multiple(x: torch.Tensor, multiple: int) -> torch.Tensor:
@@ -116,6 +164,141 @@ def supersample_pool(features: torch.Tensor, mask: torch.Tensor) -> Tuple[torch.
     return summed / coverage.clamp_min(1e-6), coverage
 
 
+IDENTITY_TRANSFORM = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
+"""The colour transform's coefficients (A row by row, then b) that render the colours unchanged."""
+
+
+def identity_transform(head: nn.Conv2d, identity: bool = True) -> None:
+    """Set the transform head to the identity (a new decoder renders the colours it is given) or to zero
+    (``identity`` False: the U-Net's own output)."""
+    with torch.no_grad():
+        head.weight.zero_()
+        head.bias.copy_(torch.tensor(IDENTITY_TRANSFORM) if identity else torch.zeros(12))
+
+
+def _stop(should_stop: StopCheck) -> None:
+    if should_stop is not None and should_stop():
+        raise RenderInterrupted("render stopped inside the decoder")
+
+
+def conv_in_strips(conv: nn.Module, x, should_stop: StopCheck = None,
+                   act: Optional[Callable[[torch.Tensor], torch.Tensor]] = None,
+                   max_macs: Optional[int] = None) -> torch.Tensor:
+    """``act(conv(x))`` (``conv(x)`` without ``act``) computed in horizontal strips of output rows, with
+    ``should_stop()`` checked before each strip (True raises :class:`RenderInterrupted`).
+
+    ``conv`` is an ``nn.Conv2d`` or ``nn.ConvTranspose2d`` (zero padding, no groups, no dilation).
+    ``x``: (B, C_in, H, W), or a sequence of tensors (B, C_i, H, W) that ``conv`` reads concatenated
+    along the channels (concatenated strip by strip: the whole is never built).
+    Each strip convolves the input rows its output rows reach -- the kernel's halo
+    (one row each side for a 3x3 kernel), padded with zeros only where the image ends --
+    so the result equals ``conv(x)`` up to float rounding. A strip holds at most
+    ``max_macs`` multiply-adds (default :data:`STRIP_MACS`; at least one output row). The output has the memory format of
+    (the first) ``x`` (NHWC stays NHWC).
+    """
+    if not isinstance(conv, (nn.Conv2d, nn.ConvTranspose2d)) or conv.groups != 1 or \
+            tuple(conv.dilation) != (1, 1) or conv.padding_mode != "zeros" or isinstance(conv.padding, str):
+        raise InputError("conv_in_strips", f"needs a plain Conv2d or ConvTranspose2d, got {conv!r}")
+    xs_all = [x] if isinstance(x, torch.Tensor) else list(x)
+    if sum(t.shape[1] for t in xs_all) != conv.in_channels or len({t.shape[-2:] for t in xs_all}) != 1:
+        raise InputError("conv_in_strips", f"inputs of shapes {[tuple(t.shape) for t in xs_all]} do not fit {conv!r}")
+    transposed = isinstance(conv, nn.ConvTranspose2d)
+    (kh, kw), (sh, sw), (ph, pw) = conv.kernel_size, conv.stride, conv.padding
+    first = xs_all[0]
+    b, (h_in, w_in) = first.shape[0], first.shape[-2:]
+    if transposed:
+        oph, opw = conv.output_padding
+        h_out = (h_in - 1) * sh - 2 * ph + kh + oph
+        w_out = (w_in - 1) * sw - 2 * pw + kw + opw
+        per_row = b * w_out * conv.in_channels * conv.out_channels * kh * kw // (sh * sw)
+    else:
+        h_out = (h_in + 2 * ph - kh) // sh + 1
+        w_out = (w_in + 2 * pw - kw) // sw + 1
+        per_row = b * w_out * conv.in_channels * conv.out_channels * kh * kw
+    per_row = max(per_row, 16 * b * w_in * conv.in_channels)  # memory-bound layers (1x1): ~16 MACs per value read
+    rows = max(1, int((STRIP_MACS if max_macs is None else max_macs) // max(1, per_row)))
+    nhwc = first.is_contiguous(memory_format=torch.channels_last) and first.stride(1) == 1  # (1 x 1: either)
+    out = torch.empty((b, conv.out_channels, h_out, w_out), dtype=first.dtype, device=first.device,
+                      memory_format=torch.channels_last if nhwc else torch.contiguous_format)
+
+    def rows_of(r0: int, r1: int) -> torch.Tensor:
+        parts = [t[:, :, r0:r1] for t in xs_all]
+        return parts[0] if len(parts) == 1 else torch.cat(parts, dim=1)
+
+    for o0 in range(0, h_out, rows):
+        _stop(should_stop)
+        o1 = min(h_out, o0 + rows)
+        if transposed:
+            # output row o = i * sh - ph + k: input rows i0..i1 reach output rows o0..o1-1
+            i0 = max(0, -(-(o0 + ph - kh + 1) // sh))
+            i1 = min(h_in - 1, (o1 - 1 + ph) // sh)
+            y = F.conv_transpose2d(rows_of(i0, i1 + 1), conv.weight, None, (sh, sw), (0, pw), (0, opw))
+            a, z = o0 - i0 * sh + ph, o1 - i0 * sh + ph  # the strip's rows in y (no input row reaches y's tail)
+            if z > y.shape[-2]:
+                y = F.pad(y, (0, 0, 0, z - y.shape[-2]))
+            y = y[:, :, a:z]
+            if conv.bias is not None:
+                y = y + conv.bias.view(1, -1, 1, 1)
+        else:
+            # output row o reads padded rows o * sh .. o * sh + kh - 1, i.e. input rows - ph
+            r0, r1 = o0 * sh - ph, (o1 - 1) * sh - ph + kh
+            top, bottom = max(0, -r0), max(0, r1 - h_in)
+            xs = rows_of(max(0, r0), min(h_in, r1))
+            if top or bottom:
+                xs = F.pad(xs, (0, 0, top, bottom))
+            y = F.conv2d(xs, conv.weight, conv.bias, (sh, sw), (0, pw))
+        out[:, :, o0:o1].copy_(y if act is None else act(y))
+    return out
+
+
+def _layer(conv: nn.Module, x: torch.Tensor, should_stop: StopCheck,
+           act: Optional[Callable[[torch.Tensor], torch.Tensor]] = None) -> torch.Tensor:
+    """``act(conv(x))``: at once without ``should_stop``, else in strips (:func:`conv_in_strips`)."""
+    if should_stop is None:
+        y = conv(x)
+        return y if act is None else act(y)
+    return conv_in_strips(conv, x, should_stop, act)
+
+
+def _assemble(features: torch.Tensor, mask: torch.Tensor, multiple: int, channels_last: bool,
+              should_stop: StopCheck) -> torch.Tensor:
+    """``[features | mask]`` zero-padded to a multiple of ``multiple`` (B, C + 1, Hp, Wp), NHWC with
+    ``channels_last``; with ``should_stop``, copied in strips of rows with a check before each."""
+    if should_stop is None:
+        x = pad_to_multiple(torch.cat([features, mask], dim=1), multiple)
+        return x.contiguous(memory_format=torch.channels_last) if channels_last else x
+    b, c, h, w = features.shape
+    hp, wp = h + (-h) % multiple, w + (-w) % multiple
+    x = torch.empty((b, c + 1, hp, wp), dtype=features.dtype, device=features.device,
+                    memory_format=torch.channels_last if channels_last else torch.contiguous_format)
+    if hp > h or wp > w:  # the padding: holes (features 0, mask 0)
+        x[:, :, h:].zero_()
+        x[:, :, :h, w:].zero_()
+    rows = max(1, STRIP_MACS // (20 * b * (c + 1) * w))  # a copy costs ~1/20 of a multiply-add's budget
+    for r0 in range(0, h, rows):
+        _stop(should_stop)
+        r1 = min(h, r0 + rows)
+        x[:, :c, r0:r1, :w].copy_(features[:, :, r0:r1])
+        x[:, c:, r0:r1, :w].copy_(mask[:, :, r0:r1])
+    return x
+
+
+def apply_colour_transform(rgb: torch.Tensor, colours: torch.Tensor, coverage: torch.Tensor,
+                           coefficients: torch.Tensor, padded: Tuple[int, int]) -> torch.Tensor:
+    """``clamp(rgb + m (A (d - rgb) + b), 0, 1)`` (see the module docstring).
+
+    rgb, colours ``d``: (B, 3, H, W); coverage ``m``: (B, 1, H, W); coefficients:
+    (B, 12, h', w') over the zero-padded frame of size ``padded`` (rows of ``A``
+    first, then ``b``): upsampled bilinearly to ``padded``, then cropped to (H, W).
+    """
+    b, _, h, w = rgb.shape
+    full = F.interpolate(coefficients, size=padded, mode="bilinear", align_corners=False)[..., :h, :w]
+    a = full[:, :9].reshape(b, 3, 3, h, w)
+    delta = colours.to(rgb.dtype) - rgb  # (B, 3, H, W)
+    mixed = torch.einsum("bijhw,bjhw->bihw", a, delta) + full[:, 9:]
+    return (rgb + coverage * mixed).clamp(0.0, 1.0)
+
+
 class _Down(nn.Module):
     def __init__(self, c_in: int, c_out: int, slope: float) -> None:
         super().__init__()
@@ -123,9 +306,10 @@ class _Down(nn.Module):
         self.conv2 = nn.Conv2d(c_out, c_out, 3, padding=1)
         self.slope = slope
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        x = F.leaky_relu(self.conv1(x), self.slope)
-        return F.leaky_relu(self.conv2(x), self.slope)
+    def forward(self, x: torch.Tensor, should_stop: StopCheck = None) -> torch.Tensor:
+        lrelu = lambda t: F.leaky_relu(t, self.slope)  # noqa: E731
+        x = _layer(self.conv1, x, should_stop, lrelu)
+        return _layer(self.conv2, x, should_stop, lrelu)
 
 
 class _Up(nn.Module):
@@ -134,9 +318,11 @@ class _Up(nn.Module):
         self.up = nn.ConvTranspose2d(c_in, c_out, 3, stride=2, padding=1, output_padding=1)
         self.conv = nn.Conv2d(2 * c_out, c_out, 3, padding=1)
 
-    def forward(self, x: torch.Tensor, skip: torch.Tensor) -> torch.Tensor:
-        x = F.relu(self.up(x))  # (B, c_out, 2h, 2w)
-        return F.relu(self.conv(torch.cat([x, skip], dim=1)))
+    def forward(self, x: torch.Tensor, skip: torch.Tensor, should_stop: StopCheck = None) -> torch.Tensor:
+        x = _layer(self.up, x, should_stop, F.relu)  # (B, c_out, 2h, 2w)
+        if should_stop is None:
+            return F.relu(self.conv(torch.cat([x, skip], dim=1)))
+        return conv_in_strips(self.conv, (x, skip), should_stop, F.relu)  # concatenated strip by strip
 
 
 class UNetDecoder(nn.Module):
@@ -146,6 +332,8 @@ class UNetDecoder(nn.Module):
     with 1 = covered by points, 0 = hole (fractions allowed), where
     (H', W') = (H, W), or (2H, 2W) with ``supersample``. Returns RGB (B, 3, H, W)
     in (0, 1), contiguous NCHW. Non-finite features raise :class:`InputError`.
+    ``should_stop`` (optional): checked between layers and between the strips of
+    each convolution (see the module docstring); True raises :class:`RenderInterrupted`.
     """
 
     def __init__(self, config: DecoderConfig = DecoderConfig()) -> None:
@@ -159,6 +347,10 @@ class UNetDecoder(nn.Module):
         self.ups = nn.ModuleList([_Up(2 * skip_ch[i], skip_ch[i]) for i in range(n)])
         self.out_conv = nn.Conv2d(skip_ch[0], skip_ch[0], 3, padding=1)
         self.out_rgb = nn.Conv2d(skip_ch[0], 3, 1)
+        self.transform = None
+        if config.transform_channels:
+            self.transform = nn.Conv2d(w, 12, 1)  # 3 x 3 matrix + offset per pixel, at 1 / 2**levels resolution
+            identity_transform(self.transform)
         if config.channels_last:
             self.to(memory_format=torch.channels_last)
 
@@ -171,24 +363,31 @@ class UNetDecoder(nn.Module):
             raise InputError("mask", f"expected shape ({b}, 1, {h}, {w}), got {tuple(mask.shape)}")
         if h < 1 or w < 1:
             raise InputError("features", f"empty image {h}x{w}")
-        check_finite(features, "features")
-        check_finite(mask, "mask")
+        for t, name in ((features, "features"), (mask, "mask")):
+            if not torch.isfinite(t.sum()):  # a sum is finite when every value is (one pass, no (B, C, H, W) bools)
+                check_finite(t, name)
 
-    def forward(self, features: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    def forward(self, features: torch.Tensor, mask: torch.Tensor, should_stop: StopCheck = None) -> torch.Tensor:
         self._check(features, mask)
         mask = mask.to(features.dtype)
         if self.config.supersample:
             features, mask = supersample_pool(features, mask)
         h, w = features.shape[-2:]
-        x = pad_to_multiple(torch.cat([features, mask], dim=1), 2**self.config.levels)  # (B, C_in+1, Hp, Wp)
-        if self.config.channels_last:
-            x = x.contiguous(memory_format=torch.channels_last)
+        colours = features[:, features.shape[1] - self.config.transform_channels:]
+        x = _assemble(features, mask, 2**self.config.levels, self.config.channels_last, should_stop)  # (B, C_in+1, Hp, Wp)
         skips: List[torch.Tensor] = []
         for skip, down in zip(self.skips, self.downs):
-            skips.append(skip(x))
-            x = down(x)
+            skips.append(_layer(skip, x, should_stop))
+            x = down(x, should_stop)
+        coarse = x  # (B, width, Hp / 2**levels, Wp / 2**levels)
         for i in reversed(range(self.config.levels)):
-            x = self.ups[i](x, skips[i])
-        x = F.relu(self.out_conv(x))
-        rgb = torch.sigmoid(self.out_rgb(x))  # (B, 3, Hp, Wp)
-        return rgb[..., :h, :w].contiguous()
+            x = self.ups[i](x, skips[i], should_stop)
+        x = _layer(self.out_conv, x, should_stop, F.relu)
+        rgb = torch.sigmoid(_layer(self.out_rgb, x, should_stop))[..., :h, :w]  # (B, 3, H, W)
+        if self.transform is not None:
+            padded = (coarse.shape[-2] * 2**self.config.levels, coarse.shape[-1] * 2**self.config.levels)
+            gain = self.config.transform_gain
+            coefficients = _layer(self.transform, coarse * gain if gain != 1.0 else coarse, should_stop)
+            _stop(should_stop)
+            rgb = apply_colour_transform(rgb, colours, mask, coefficients, padded)
+        return rgb.contiguous()

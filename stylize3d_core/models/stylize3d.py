@@ -18,6 +18,21 @@ style comes from the stylized features. D = 0 is the paper's layout (and that of
 checkpoints written before the detail path; :func:`add_detail_path` widens such a
 model without changing its output).
 
+**Colour transform** (``decoder.transform_channels`` = 3, the default with the
+detail path): the decoder does not only see the points' colours, it recolours
+them: a smooth per-pixel 3 x 3 colour matrix and offset predicted from its
+coarsest level map the rasterized colours towards the style, and its own
+output fills holes and adds texture (see :mod:`.decoder`). Sharpness and
+view-to-view consistency then come from the points themselves. Models without
+it get it from :func:`add_colour_transform` (a zero head: same output, or the
+identity: the points' colours).
+
+**Colour transfer of the detail** (``detail_transfer``, the default): with a
+style, the points' colours on the detail path are first moved to the style's
+L*a*b* statistics (:mod:`.colour_transfer`, scaled by the strength), once per
+photo, style and strength; the decoder's transform and texture start from
+there. At strength 0 they are the photo's colours.
+
 The projection to ``raster_channels`` happens before the IDW upsampling: both
 are linear and the IDW weights sum to one, so the order does not change the
 result, and projecting the M sparse points is 16x cheaper than the N dense ones.
@@ -44,7 +59,7 @@ from ..points import interpolate
 from ..render.rasterize import Fragments, RasterSettings
 from ..render.rasterizer import PointRasterizer
 from .adaattn import AdaAttNConfig, AdaAttNStylizer, blend
-from .decoder import DecoderConfig, UNetDecoder
+from .decoder import DecoderConfig, UNetDecoder, identity_transform
 from .encoder import Encoder, EncoderConfig
 from .scene_geometry import NeighbourhoodConfig, SceneGeometry, prepare_geometry
 
@@ -69,6 +84,8 @@ class ModelConfig:
         raster_channels: learned feature channels splatted by the rasterizer.
         detail_channels: 0 (no detail path) or 3 (each point's RGB rasterized beside the features).
         decoder: the U-Net; ``in_channels`` must equal ``raster_channels + detail_channels``.
+        detail_transfer: with a style, the detail path carries the points' colours moved to the
+            style's colour statistics (:mod:`.colour_transfer`); needs the detail path.
     """
 
     name: ConfigName = "lite"
@@ -77,8 +94,10 @@ class ModelConfig:
     stylizer: AdaAttNConfig = field(default_factory=lambda: AdaAttNConfig(
         content_channels=128, hidden=128, value_channels=128, qk_channels=64))
     raster_channels: int = 32
-    decoder: DecoderConfig = field(default_factory=lambda: DecoderConfig.lite(in_channels=32 + 3))
+    decoder: DecoderConfig = field(default_factory=lambda: DecoderConfig.lite(in_channels=32 + 3,
+                                                                              transform_channels=3))
     detail_channels: int = 3
+    detail_transfer: bool = True
 
     def __post_init__(self) -> None:
         if not isinstance(self.neighbourhood, NeighbourhoodConfig):
@@ -96,22 +115,29 @@ class ModelConfig:
         if self.decoder.in_channels != self.raster_channels + self.detail_channels:
             raise InputError("ModelConfig", f"decoder in_channels {self.decoder.in_channels} != "
                              f"raster_channels {self.raster_channels} + detail_channels {self.detail_channels}")
+        if self.detail_transfer and not self.detail_channels:
+            raise InputError("ModelConfig.detail_transfer", "needs the detail path (detail_channels 3)")
+        if self.decoder.transform_channels not in (0, self.detail_channels):
+            raise InputError("ModelConfig", f"the decoder's colour transform recolours the detail path's "
+                             f"{self.detail_channels} channels; got transform_channels "
+                             f"{self.decoder.transform_channels}")
         if self.decoder.supersample:
             raise InputError("ModelConfig", "supersampling is done by the rasterizer; keep decoder.supersample False")
 
     @classmethod
     def lite(cls) -> "ModelConfig":
         """CPU configuration: encoder 32/64/128, AdaAttN 128 (q/k 64), 32 raster channels + the RGB detail
-        path, decoder width 96."""
+        path and its colour transform, decoder width 96."""
         return cls()
 
     @classmethod
     def paper(cls) -> "ModelConfig":
         """The public code's widths: encoder 64/128/256, AdaAttN 256, 256 raster channels + the RGB
-        detail path, decoder 256."""
+        detail path and its colour transform, decoder 256."""
         return cls(
             name="paper", encoder=EncoderConfig.paper(), stylizer=AdaAttNConfig.paper(),
-            raster_channels=256, decoder=DecoderConfig.paper(in_channels=256 + 3), detail_channels=3,
+            raster_channels=256, decoder=DecoderConfig.paper(in_channels=256 + 3, transform_channels=3),
+            detail_channels=3,
         )
 
     @classmethod
@@ -154,14 +180,19 @@ class Stylize3DModel(nn.Module):
             return content
         return blend(content, self.stylizer.stylize(content, style_maps), alpha)
 
-    def dense_features(self, sparse: torch.Tensor, geom: SceneGeometry) -> torch.Tensor:
+    def dense_features(self, sparse: torch.Tensor, geom: SceneGeometry,
+                       colours: Optional[torch.Tensor] = None) -> torch.Tensor:
         """Project sparse features (M, C) to raster channels and upsample to every point: (N, Cr + D).
 
-        With the detail path (D = 3) the points' own colours ``geom.rgb`` follow the Cr learned channels.
+        With the detail path (D = 3) the points' colours follow the Cr learned channels: ``colours``
+        (N, 3) when given (the colour-transferred ones, see ``detail_transfer``), else ``geom.rgb``.
         """
         dense = interpolate(self.to_raster(sparse), geom.upsample.idx, geom.upsample.weight)
         if self.config.detail_channels:
-            dense = torch.cat([dense, geom.rgb.to(dense.dtype)], dim=1)
+            rgb = geom.rgb if colours is None else colours
+            if tuple(rgb.shape) != (dense.shape[0], 3):
+                raise InputError("colours", f"expected shape ({dense.shape[0]}, 3), got {tuple(rgb.shape)}")
+            dense = torch.cat([dense, rgb.to(dense.dtype)], dim=1)
         return dense
 
     def render_view(
@@ -171,14 +202,15 @@ class Stylize3DModel(nn.Module):
         """Decode one view: (3, H, W) RGB in (0, 1) and the rasterizer's fragments.
 
         For a fast preview pass a subset of the points (see ``Stylized3DPhoto``).
-        ``should_stop`` is checked between the rasterizer's chunks of points (True
-        stops with :class:`~stylize3d_core.errors.RenderInterrupted`).
+        ``should_stop`` is checked between the rasterizer's chunks of points and
+        between the decoder's layers and strips (``UNetDecoder.forward``); True
+        stops with :class:`~stylize3d_core.errors.RenderInterrupted`.
         """
         settings = RasterSettings(height=int(height), width=int(width), supersample=supersample)
         frags = PointRasterizer(settings)(xyz, dense, camera, should_stop=should_stop)
         features = frags.image.unsqueeze(0)  # (1, Cr, H, W)
         mask = (~frags.hole).to(features.dtype)[None, None]  # (1, 1, H, W)
-        rgb = self.decoder(features, mask)[0]  # (3, H, W)
+        rgb = self.decoder(features, mask, should_stop=should_stop)[0]  # (3, H, W)
         return rgb, frags
 
 
@@ -193,7 +225,8 @@ def add_detail_path(model: Stylize3DModel) -> Stylize3DModel:
     if cfg.detail_channels:
         raise InputError("model", "already has the detail path")
     d = DETAIL_CHANNELS[-1]
-    new_cfg = replace(cfg, detail_channels=d, decoder=replace(cfg.decoder, in_channels=cfg.decoder.in_channels + d))
+    new_cfg = replace(cfg, detail_channels=d, decoder=replace(cfg.decoder, in_channels=cfg.decoder.in_channels + d),
+                      detail_transfer=False)
     wide = Stylize3DModel(new_cfg)
     state = dict(model.state_dict())
     c = cfg.decoder.in_channels  # learned channels; the mask channel follows them
@@ -206,11 +239,37 @@ def add_detail_path(model: Stylize3DModel) -> Stylize3DModel:
     return wide
 
 
+def add_colour_transform(model: Stylize3DModel, identity: bool = False,
+                         transfer: Optional[bool] = None) -> Stylize3DModel:
+    """A copy of a model with the detail path but no colour transform, with a transform head added.
+
+    ``identity`` False: a zero head, so the output is unchanged until training
+    moves it; True: the identity transform, so every covered pixel shows the
+    rasterized point colours (the U-Net keeps filling holes). ``transfer``: the
+    new model's ``detail_transfer`` (None: unchanged).
+    """
+    cfg = model.config
+    if not cfg.detail_channels:
+        raise InputError("model", "has no detail path to recolour: add_detail_path first")
+    if cfg.decoder.transform_channels:
+        raise InputError("model", "already has the colour transform")
+    new_cfg = replace(cfg, decoder=replace(cfg.decoder, transform_channels=cfg.detail_channels,
+                                           transform_gain=1.0 / cfg.decoder.width),
+                      detail_transfer=cfg.detail_transfer if transfer is None else bool(transfer))
+    wide = Stylize3DModel(new_cfg)
+    missing, unexpected = wide.load_state_dict(model.state_dict(), strict=False)
+    if unexpected or any(not k.startswith("decoder.transform.") for k in missing):
+        raise InputError("model", f"unexpected weights when adding the colour transform: {missing} {unexpected}")
+    identity_transform(wide.decoder.transform, identity)
+    wide.train(model.training)
+    return wide
+
+
 def count_parameters(module: nn.Module) -> int:
     """Number of trainable parameters."""
     return sum(p.numel() for p in module.parameters() if p.requires_grad)
 
 
 __all__ = [
-    "DETAIL_CHANNELS", "add_detail_path", "ModelConfig", "NeighbourhoodConfig", "SceneGeometry", "prepare_geometry", "Stylize3DModel", "count_parameters",
+    "DETAIL_CHANNELS", "add_colour_transform", "add_detail_path", "ModelConfig", "NeighbourhoodConfig", "SceneGeometry", "prepare_geometry", "Stylize3DModel", "count_parameters",
 ]

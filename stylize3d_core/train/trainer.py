@@ -47,10 +47,11 @@ from ..checks import check_range
 from ..errors import InputError
 from ..io.atomic import atomic_path
 from ..models.checkpoint import load_checkpoint, save_checkpoint
+from ..models.colour_transfer import lab_stats, transfer_colours
 from ..models.efficientnet_lite import EfficientNetLiteFeatures
 from ..models.losses import PerceptualLoss, PerceptualLossConfig, StylizationLoss, colour_statistics_loss
 from ..models.style_features import StyleEncoder
-from ..models.stylize3d import ConfigName, ModelConfig, Stylize3DModel, add_detail_path
+from ..models.stylize3d import ConfigName, ModelConfig, Stylize3DModel, add_colour_transform, add_detail_path
 from ..render.reproject import pairwise_consistency, sample_view
 from .cache import TrainDataset
 from .data import TrainSample
@@ -220,7 +221,10 @@ class TrainStep(nn.Module):
             feats = self.model.stylizer.stylize(content, maps)
         else:
             maps, feats = None, content
-        dense = self.model.dense_features(feats, geom)  # (N, Cr)
+        colours = None
+        if style is not None and self.model.config.detail_transfer:
+            colours = transfer_colours(geom.rgb, lab_stats(style))  # the style's colour statistics, at strength 1
+        dense = self.model.dense_features(feats, geom, colours)  # (N, Cr)
         H, W = sample.image_size
         views, zbufs = [], []
         for v in range(len(sample.cameras)):
@@ -298,6 +302,12 @@ def train(config: TrainConfig, log: Log = print) -> Path:
     if state is None and not model.config.detail_channels and ModelConfig.by_name(config.model).detail_channels:
         model = add_detail_path(model)
         log("added the detail path to the initial model (zero weights: same output)")
+    if (state is None and model.config.detail_channels and not model.config.decoder.transform_channels
+            and ModelConfig.by_name(config.model).decoder.transform_channels):
+        target = ModelConfig.by_name(config.model)
+        model = add_colour_transform(model, identity=True, transfer=target.detail_transfer)
+        log("added the colour transform to the initial model (identity: it renders the points' colours"
+            + (", moved to the style's colour statistics)" if target.detail_transfer else ")"))
     if state is None and config.init_stylizer is not None:
         donor = load_checkpoint(config.init_stylizer).model
         if donor.config.stylizer != model.config.stylizer or donor.config.encoder != model.config.encoder:

@@ -10,13 +10,9 @@ Xvfb the tests are skipped with the reason. One test also drags with the real
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 import json
 import multiprocessing
-import os
-import select
 import shutil
-import subprocess
 import time
 from pathlib import Path
 from typing import Any, Dict, Iterator, List, Optional, Tuple
@@ -26,6 +22,7 @@ import pytest
 from PIL import Image
 
 from app.viewer.script import run_viewer_process
+from app.viewer.xserver import start_xvfb, xtest_libs
 
 pytestmark = [pytest.mark.gui, pytest.mark.slow]  # each test starts Open3D in a subprocess: 8-30 s
 
@@ -38,30 +35,14 @@ RUN_TIMEOUT_S = 300
 @pytest.fixture(scope="module")
 def display() -> Iterator[str]:
     """An X display served by a private Xvfb for this module."""
-    xvfb = shutil.which("Xvfb")
-    if xvfb is None:
+    if shutil.which("Xvfb") is None:
         pytest.skip("Xvfb is not installed: the viewer window tests need an X server (apt-get install xvfb)")
-    r, w = os.pipe()
-    proc = subprocess.Popen([xvfb, "-displayfd", str(w), "-screen", "0", f"{SCREEN[0]}x{SCREEN[1]}x24",
-                             "-nolisten", "tcp"], pass_fds=(w,), stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
-    os.close(w)
-    number = b""
-    t_end = time.monotonic() + 20
-    while not number.endswith(b"\n") and time.monotonic() < t_end:
-        ready, _, _ = select.select([r], [], [], 0.5)
-        if ready:
-            chunk = os.read(r, 16)
-            if not chunk:
-                break
-            number += chunk
-    os.close(r)
-    if not number.strip().isdigit():
-        proc.kill()
-        proc.wait()
+    server = start_xvfb(SCREEN)
+    if server is None:
         pytest.skip("Xvfb did not start (no display number reported): no X server for the window tests")
+    proc, name = server
     try:
-        yield f":{int(number)}"
+        yield name
     finally:
         proc.terminate()
         proc.wait(timeout=10)
@@ -245,22 +226,7 @@ def test_stylized_view_strength_style_export_and_no_freeze(display, tmp_path, un
 
 def _xtest():
     """(libX11, libXtst) through ctypes, or None where they are missing."""
-    x11, xtst = ctypes.util.find_library("X11"), ctypes.util.find_library("Xtst")
-    if not x11 or not xtst:
-        return None
-    lx, lt = ctypes.CDLL(x11), ctypes.CDLL(xtst)
-    lx.XOpenDisplay.restype = ctypes.c_void_p
-    lx.XOpenDisplay.argtypes = [ctypes.c_char_p]
-    for name in ("XFlush", "XCloseDisplay"):
-        getattr(lx, name).argtypes = [ctypes.c_void_p]
-    lt.XTestFakeMotionEvent.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_ulong]
-    lt.XTestFakeButtonEvent.argtypes = [ctypes.c_void_p, ctypes.c_uint, ctypes.c_int, ctypes.c_ulong]
-    lt.XTestFakeKeyEvent.argtypes = [ctypes.c_void_p, ctypes.c_uint, ctypes.c_int, ctypes.c_ulong]
-    lx.XStringToKeysym.restype = ctypes.c_ulong
-    lx.XStringToKeysym.argtypes = [ctypes.c_char_p]
-    lx.XKeysymToKeycode.restype = ctypes.c_ubyte
-    lx.XKeysymToKeycode.argtypes = [ctypes.c_void_p, ctypes.c_ulong]
-    return lx, lt
+    return xtest_libs()
 
 
 def test_real_mouse_drag_and_key_press(display, tmp_path):

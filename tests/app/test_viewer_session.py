@@ -16,7 +16,7 @@ import pytest
 import app.viewer.session as session_mod
 from app.viewer.orbit import HOME, OrbitPose, pose_camera
 from app.viewer.session import (
-    NO_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE, ExportJob, ViewerSession, display_image,
+    NO_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE, ExportJob, ViewerSession, colour_jump, display_image,
 )
 from stylize3d_core.render.plain import frame_size
 from stylize3d_core.errors import InputError
@@ -226,3 +226,19 @@ def test_the_photos_clean_camera_range_bounds_the_orbit(plain):
     assert wild.dolly == pytest.approx(rng.min_dolly * plain.info.scene.centre_depth)
     narrow = OrbitLimits.from_range(replace(rng, max_yaw_deg=1.0))  # a narrower range: a tighter clamp
     assert clamp_pose(OrbitPose(yaw_deg=80.0), plain.info.scene, narrow).yaw_deg == pytest.approx(1.0)
+
+
+def test_colour_jump_known_values():
+    before = np.zeros((4, 6, 3), np.uint8)
+    after = before.copy()
+    after[..., 0] = 12  # red up by 12 everywhere: means differ by 12 in one channel of three
+    assert colour_jump(before, after) == pytest.approx((4.0, 4.0))
+    after[:2, :, 1] = 30  # green up by 30 on the top half only, red unchanged
+    after[:2, :, 0] = 0
+    mean_diff, pixel_diff = colour_jump(before, after)
+    assert mean_diff == pytest.approx((6 + 15) / 3) and pixel_diff == pytest.approx((6 + 15) / 3)
+    after = np.full((4, 6, 3), 50, np.uint8)
+    after[:, :3] = 0  # same mean colour as 25 everywhere, but every pixel 25 away from it
+    assert colour_jump(np.full((4, 6, 3), 25, np.uint8), after) == pytest.approx((0.0, 25.0))
+    with pytest.raises(InputError, match="shapes differ"):
+        colour_jump(before, np.zeros((4, 5, 3), np.uint8))

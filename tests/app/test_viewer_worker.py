@@ -204,3 +204,13 @@ def test_interrupt_render_only_stops_renders_that_carry_a_cancel_event(worker):
     assert not worker.interrupt_render()
     go_on.set()
     wait_idle(worker)
+
+
+def test_render_waiting_is_true_only_until_the_render_starts(worker):
+    assert not worker.render_waiting()
+    release = blocker(worker)
+    worker.request_render(lambda: 1, lambda r: None, preview=True)
+    assert worker.render_waiting()  # queued behind the task
+    release.set()
+    wait_idle(worker)
+    assert not worker.render_waiting()

@@ -1,4 +1,3 @@
-import dataclasses
 import json
 
 import pytest
@@ -123,21 +122,20 @@ def test_version_1_layout_is_mapped_to_the_neighbourhood_config(tmp_path):
     _with_metadata(good, bad, version="1")
     with pytest.raises(InputError, match="mixed.safetensors.*configuration is unreadable"):
         load_checkpoint(bad)
-    _with_metadata(good, bad, version="4")
-    with pytest.raises(InputError, match="version .4. is not supported"):
+    _with_metadata(good, bad, version="5")
+    with pytest.raises(InputError, match="version .5. is not supported"):
         load_checkpoint(bad)
 
 
-def test_shipped_version_1_checkpoint_loads_with_the_default_neighbourhoods():
+def test_shipped_checkpoint_is_the_current_lite_layout():
     from safetensors import safe_open
 
     from stylize3d_core.pipeline import DEFAULT_MODEL
 
     with safe_open(str(DEFAULT_MODEL), framework="pt") as f:
         meta = f.metadata()
-    assert meta["version"] == "1" and "neighbourhood" not in json.loads(meta["config"])
-    config = load_checkpoint(DEFAULT_MODEL).model.config
-    lite = ModelConfig.lite()  # less the detail path, which came with version 3
-    assert config == dataclasses.replace(lite, detail_channels=0,
-                                         decoder=dataclasses.replace(lite.decoder, in_channels=32))
-    assert config.neighbourhood == NeighbourhoodConfig()
+    assert meta["version"] == "4"
+    ck = load_checkpoint(DEFAULT_MODEL)
+    assert ck.model.config == ModelConfig.lite()  # detail path, colour transform, colour transfer
+    assert ck.model.config.neighbourhood == NeighbourhoodConfig()
+    assert ck.info["hours_total"] > 0 and "provenance" in ck.info

@@ -6,7 +6,15 @@ import pytest
 import torch
 
 from stylize3d_core.errors import InputError
-from stylize3d_core.models.decoder import DecoderConfig, UNetDecoder, pad_to_multiple, supersample_pool
+from stylize3d_core.models.decoder import (
+    DecoderConfig,
+    UNetDecoder,
+    IDENTITY_TRANSFORM,
+    apply_colour_transform,
+    identity_transform,
+    pad_to_multiple,
+    supersample_pool,
+)
 
 
 def _inputs(b, c, h, w, seed=0):
@@ -136,3 +144,56 @@ def test_bad_inputs(lite):
         DecoderConfig(width=30)
     with pytest.raises(InputError, match="levels"):
         DecoderConfig(levels=0)
+
+
+def test_colour_transform_known_values():
+    """out = clamp(rgb + m (A (d - rgb) + b)) with a constant A and b, fractional coverage."""
+    g = torch.Generator().manual_seed(3)
+    rgb = torch.rand(2, 3, 5, 7, generator=g)
+    d = torch.rand(2, 3, 5, 7, generator=g)
+    m = torch.rand(2, 1, 5, 7, generator=g)
+    a = torch.tensor([[0.5, 0.2, 0.0], [0.0, 1.0, 0.0], [0.1, 0.0, 0.3]])
+    off = torch.tensor([0.05, -0.1, 0.0])
+    coeff = torch.cat([a.reshape(9), off]).reshape(1, 12, 1, 1).expand(2, 12, 2, 2)  # constant field
+    out = apply_colour_transform(rgb, d, m, coeff, (8, 8))
+    want = rgb + m * (torch.einsum("ij,bjhw->bihw", a, d - rgb) + off[None, :, None, None])
+    torch.testing.assert_close(out, want.clamp(0, 1), rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize("supersample,h,w", [(False, 13, 22), (True, 10, 14)])
+def test_colour_transform_head_identity_zero_and_sizes(supersample, h, w):
+    torch.manual_seed(1)
+    cfg = DecoderConfig(in_channels=8 + 3, width=16, transform_channels=3, supersample=supersample,
+                        transform_gain=1.0 / 16)
+    dec = UNetDecoder(cfg).eval()
+    assert dec.transform.bias.tolist() == list(IDENTITY_TRANSFORM)  # a new decoder starts at the identity
+    identity_transform(dec.transform, False)
+    plain = UNetDecoder(DecoderConfig(in_channels=8 + 3, width=16, supersample=supersample)).eval()
+    plain.load_state_dict({k: v for k, v in dec.state_dict().items() if not k.startswith("transform.")})
+    s = 2 if supersample else 1
+    feats, mask = _inputs(1, 11, h * s, w * s)
+    feats[:, -3:] = feats[:, -3:].abs().clamp(max=1) * mask
+    with torch.no_grad():
+        zero = dec(feats, mask)
+        torch.testing.assert_close(zero, plain(feats, mask), rtol=0, atol=1e-6)  # zero head: the U-Net
+        identity_transform(dec.transform)
+        ident = dec(feats, mask)
+    assert ident.shape == (1, 3, h, w)
+    if supersample:
+        colours, cover = supersample_pool(feats[:, -3:], mask)
+    else:
+        colours, cover = feats[:, -3:], mask
+    full = cover[:, 0] == 1
+    torch.testing.assert_close(ident[:, :, full[0]], colours[:, :, full[0]], rtol=0, atol=1e-5)
+    holes = cover[:, 0] == 0
+    torch.testing.assert_close(ident[:, :, holes[0]], zero[:, :, holes[0]], rtol=0, atol=1e-6)
+
+
+def test_colour_transform_config_checks():
+    with pytest.raises(InputError, match="transform_channels"):
+        DecoderConfig(in_channels=8, transform_channels=2)
+    with pytest.raises(InputError, match="transform_channels"):
+        DecoderConfig(in_channels=3, width=16, transform_channels=3)
+    assert DecoderConfig.lite(in_channels=35, transform_channels=3).transform_gain == pytest.approx(1 / 96)
+    with pytest.raises(InputError, match="transform_gain"):
+        DecoderConfig(in_channels=8, transform_channels=3, transform_gain=0.0)

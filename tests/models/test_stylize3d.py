@@ -10,6 +10,7 @@ from stylize3d_core.models.scene_geometry import NeighbourhoodConfig, prepare_ge
 from stylize3d_core.models.stylize3d import (
     ModelConfig,
     Stylize3DModel,
+    add_colour_transform,
     add_detail_path,
     count_parameters,
 )
@@ -21,10 +22,11 @@ TINY = ModelConfig(
     raster_channels=8,
     decoder=DecoderConfig(in_channels=8, width=16),
     detail_channels=0,
+    detail_transfer=False,
 )
 TINY_DETAIL = ModelConfig(
     name="lite", encoder=TINY.encoder, stylizer=TINY.stylizer, raster_channels=8,
-    decoder=DecoderConfig(in_channels=8 + 3, width=16), detail_channels=3,
+    decoder=DecoderConfig(in_channels=8 + 3, width=16), detail_channels=3, detail_transfer=False,
 )
 
 
@@ -117,12 +119,49 @@ def test_add_detail_path_keeps_the_output_and_learns_the_new_input(cloud):
         add_detail_path(wide)
 
 
+def test_add_colour_transform_keeps_the_output_and_learns_to_recolour(cloud):
+    pts, fov = cloud
+    geom = prepare_geometry(pts.xyz, pts.rgb, fov, (40, 48), TINY.neighbourhood)
+    torch.manual_seed(0)
+    plain = add_detail_path(Stylize3DModel(TINY)).eval()
+    with pytest.raises(InputError, match="detail path"):
+        add_colour_transform(Stylize3DModel(TINY))
+    head = add_colour_transform(plain)
+    assert head.config.decoder.transform_channels == 3 and not head.training
+    cam = Cameras.identity(fov)
+    with torch.no_grad():
+        before, frags = plain.render_view(plain.dense_features(plain.encode(geom), geom), geom.xyz, cam, 24, 32)
+        after = head.render_view(head.dense_features(head.encode(geom), geom), geom.xyz, cam, 24, 32)[0]
+    torch.testing.assert_close(after, before, rtol=0, atol=1e-6)
+    # the identity transform renders the rasterized point colours wherever points land
+    with torch.no_grad():
+        head.decoder.transform.bias.copy_(torch.tensor([1., 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0]))
+        rgb = head.render_view(head.dense_features(head.encode(geom), geom), geom.xyz, cam, 24, 32)[0]
+    covered = ~frags.hole
+    colours = frags.image[-3:]
+    torch.testing.assert_close(rgb[:, covered], colours[:, covered].clamp(0, 1), rtol=0, atol=1e-5)
+    torch.testing.assert_close(rgb[:, ~covered], before[:, ~covered], rtol=0, atol=1e-6)  # holes: the U-Net's
+    # the zero head gets gradients
+    fresh = add_colour_transform(plain).train()
+    out, _ = fresh.render_view(fresh.dense_features(fresh.encode(geom), geom), geom.xyz, cam, 24, 32)
+    out.mean().backward()
+    assert fresh.decoder.transform.weight.grad.abs().sum() > 0
+    with pytest.raises(InputError, match="already"):
+        add_colour_transform(head)
+
+
 def test_config_checks():
     with pytest.raises(InputError):
         ModelConfig(raster_channels=16)  # decoder expects 32 + 3
     with pytest.raises(InputError, match="detail_channels"):
         ModelConfig(detail_channels=1)
     assert ModelConfig().decoder.in_channels == 35 and ModelConfig.lite().detail_channels == 3
+    assert ModelConfig.lite().decoder.transform_channels == 3 == ModelConfig.paper().decoder.transform_channels
+    with pytest.raises(InputError, match="colour transform"):
+        ModelConfig(detail_channels=0, decoder=DecoderConfig.lite(in_channels=32 + 3, transform_channels=3),
+                    raster_channels=35, detail_transfer=False)
+    with pytest.raises(InputError, match="detail_transfer"):
+        ModelConfig(detail_channels=0, decoder=DecoderConfig.lite(in_channels=32), raster_channels=32)
     with pytest.raises(InputError):
         ModelConfig.by_name("huge")
     assert ModelConfig.paper().raster_channels == 256
