@@ -2,7 +2,7 @@
 
     stylize3d render PHOTO [--depth SPEC] [--trajectory circle] [--frames 90]
                            [--fps 30] [--size 512] [-o out.mp4] [--save-ply FILE]
-    stylize3d bench speed|consistency|scaling|stress|skips|quality [--quick] [--out bench/]
+    stylize3d bench speed|consistency|scaling|stress|skips|targets|floor|quality [--quick] [--out bench/]
 
 Exit status: 0 on success, 2 for bad input (the message names the file or the
 setting), 1 when an output could not be written, 3 for an unexpected internal
@@ -95,12 +95,12 @@ def _add_info(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--json", action="store_true", help="print the report as JSON")
 
 
-BENCH_SUITES = ("speed", "consistency", "scaling", "stress", "skips", "quality")
+BENCH_SUITES = ("speed", "consistency", "scaling", "stress", "skips", "targets", "floor", "quality")
 
 
 def _add_bench(sub: "argparse._SubParsersAction") -> None:
-    p = sub.add_parser("bench", help="measure speed against quality, consistency, scaling, skipped work; "
-                                     "run the numerical stress cases",
+    p = sub.add_parser("bench", help="measure speed against quality, the targets, the floor, consistency, "
+                                     "scaling, skipped work; run the numerical stress cases",
                        description="Write Markdown + JSON tables and PNG plots to --out "
                                    "(see stylize3d_core/bench/). Figures on a busy machine are pessimistic.")
     p.add_argument("suite", choices=BENCH_SUITES, help="what to measure")

@@ -8,7 +8,9 @@ what changes           what is recomputed                           typical cost
 =====================  ==========================================  ==================
 photo                  geometry (NDC, FPS, ball queries, 3-NN),     seconds
                        content features
-style                  style CNN features, AdaAttN                  < 1 s
+style                  style CNN features (kept for the last few    < 1 s
+                       style images: a new photo reuses them),
+                       AdaAttN
 second style / mix     (its features once) then a blend             ~0.1 s (at the next render)
 strength               blend + IDW upsampling to every point        ~0.1 s (at the next render)
 camera                 rasterize + U-Net decode                     see benchmarks
@@ -25,9 +27,12 @@ Thread use: an instance is not thread-safe; call it from one (worker) thread.
 
 from __future__ import annotations
 
+import hashlib
 import time
+import weakref
+from collections import OrderedDict
 from dataclasses import dataclass
-from typing import Callable, Dict, Iterator, List, Optional
+from typing import Callable, Dict, Iterator, List, Optional, Tuple
 
 import numpy as np
 import torch
@@ -38,7 +43,7 @@ from .geometry.camera import Cameras
 from .models.adaattn import blend
 from .models.checkpoint import Checkpoint, load_checkpoint
 from .models.colour_transfer import ColourTransfer, LabStats, lab_stats, mix_stats
-from .models.style_features import StyleEncoder
+from .models.style_features import StyleEncoder, StyleFeatures
 from .models.scene_geometry import SceneGeometry, prepare_geometry
 from .models.stylize3d import Stylize3DModel
 from .render.plain import StratifiedOrder, preview_point_count
@@ -54,18 +59,24 @@ class StylizeSettings:
         supersample: 1 (default) or 2 for full-quality frames (previews never supersample).
         preview_points_per_pixel: points kept per output pixel in previews. Default 3.
         seed: seed of the point order and the encoder's subset.
+        final_points_per_pixel: None (default): full frames rasterize every point. A number: full frames
+            keep about this many points per output (super)pixel, as previews do (a prefix of the point
+            order), where more would land on each pixel (``bench speed`` measures the error).
     """
 
     strength: float = 0.8
     supersample: int = 1
     preview_points_per_pixel: float = 3.0
     seed: int = 0
+    final_points_per_pixel: Optional[float] = None
 
     def __post_init__(self) -> None:
         check_range(self.strength, "strength", 0.0, 1.0)
         if self.supersample not in (1, 2):
             raise InputError("supersample", f"must be 1 or 2, got {self.supersample!r}")
         check_range(self.preview_points_per_pixel, "preview_points_per_pixel", 0.5, 100.0)
+        if self.final_points_per_pixel is not None:
+            check_range(self.final_points_per_pixel, "final_points_per_pixel", 0.5, 100.0)
 
 
 def style_tensor(style_rgb: np.ndarray, name: str = "style image") -> torch.Tensor:
@@ -74,6 +85,65 @@ def style_tensor(style_rgb: np.ndarray, name: str = "style image") -> torch.Tens
     if not np.isfinite(style_rgb).all():
         raise InputError(name, "contains NaN or infinite values")
     return torch.from_numpy(np.ascontiguousarray(style_rgb, dtype=np.float32)).permute(2, 0, 1)[None].clamp(0, 1)
+
+
+class StyleFeatureCache:
+    """The style CNN's features of the last ``size`` style images, so a new photo with the same style skips the CNN.
+
+    Keyed by the style tensor's shape and bytes (BLAKE2b) and the CPU autocast state (a bfloat16 autocast
+    gives other features). The cached :class:`StyleFeatures` are inference tensors that nothing modifies.
+    One cache per :class:`StyleEncoder` (:func:`style_feature_cache`), so every ``Stylized3DPhoto`` sharing
+    an encoder (the viewer's photos) shares its cache.
+    """
+
+    def __init__(self, encoder: StyleEncoder, size: int = 4) -> None:
+        if size < 1:
+            raise InputError("style cache size", f"must be >= 1, got {size!r}")
+        self.encoder = encoder
+        self.size = int(size)
+        self._entries: "OrderedDict[Tuple, StyleFeatures]" = OrderedDict()
+        self.hits = 0
+        self.misses = 0
+
+    @staticmethod
+    def key(style: torch.Tensor) -> Tuple:
+        x = style.detach().contiguous()
+        digest = hashlib.blake2b(x.numpy().tobytes(), digest_size=16).hexdigest()
+        return (tuple(x.shape), str(x.dtype), digest, torch.is_autocast_enabled("cpu"),
+                str(torch.get_autocast_dtype("cpu")))
+
+    def features(self, style: torch.Tensor) -> StyleFeatures:
+        """The encoder's features of ``style`` (1, 3, h, w), from the cache when this image was seen."""
+        k = self.key(style)
+        hit = self._entries.get(k)
+        if hit is not None:
+            self._entries.move_to_end(k)
+            self.hits += 1
+            return hit
+        self.misses += 1
+        with torch.inference_mode():
+            maps = self.encoder(style)
+        self._entries[k] = maps
+        while len(self._entries) > self.size:
+            self._entries.popitem(last=False)
+        return maps
+
+    def clear(self) -> None:
+        self._entries.clear()
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+
+_CACHES: "weakref.WeakKeyDictionary[StyleEncoder, StyleFeatureCache]" = weakref.WeakKeyDictionary()
+
+
+def style_feature_cache(encoder: StyleEncoder) -> StyleFeatureCache:
+    """The one :class:`StyleFeatureCache` of ``encoder`` (made at the first call, gone with the encoder)."""
+    cache = _CACHES.get(encoder)
+    if cache is None:
+        cache = _CACHES[encoder] = StyleFeatureCache(encoder)
+    return cache
 
 
 def _stop_hooks(decoder: torch.nn.Module, should_stop: Callable[[], bool]) -> List:
@@ -164,7 +234,7 @@ class Stylized3DPhoto:
         else:
             t0 = time.perf_counter()
             with torch.inference_mode():
-                maps = self._encoder()(style_tensor(style_rgb)).maps
+                maps = style_feature_cache(self._encoder()).features(style_tensor(style_rgb)).maps
                 self._stylized = self.model.stylizer.stylize(self._content, maps).float()  # (M, C), float32 after autocast
             self._style_stats = lab_stats(style_rgb)
             self.timings["style"] = time.perf_counter() - t0
@@ -177,7 +247,8 @@ class Stylized3DPhoto:
             self._style_stats2 = None
         else:
             with torch.inference_mode():
-                maps = self._encoder()(style_tensor(style_rgb, "second style image")).maps
+                second = style_tensor(style_rgb, "second style image")
+                maps = style_feature_cache(self._encoder()).features(second).maps
                 self._stylized2 = self.model.stylizer.stylize(self._content, maps).float()  # (M, C), as set_style
             self._style_stats2 = lab_stats(style_rgb)
         self._dense = None
@@ -239,7 +310,10 @@ class Stylized3DPhoto:
             keep = self._strata.prefix(preview_point_count(n, height, width, self.settings.preview_points_per_pixel))
             ss = 1
         else:
-            keep, ss = n, self.settings.supersample
+            ss = self.settings.supersample
+            per_pixel = self.settings.final_points_per_pixel
+            keep = n if per_pixel is None else self._strata.prefix(
+                preview_point_count(n, height * ss, width * ss, per_pixel))
         hooks = _stop_hooks(self.model.decoder, should_stop) if should_stop is not None else []
         try:
             with torch.inference_mode():

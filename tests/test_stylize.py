@@ -178,6 +178,66 @@ def test_plain_renderer_grown_splats_chunked_are_unchanged(stylized, monkeypatch
         monkeypatch.undo()
 
 
+def test_style_features_are_cached_per_encoder(stylized):
+    from stylize3d_core.models.style_features import StyleEncoder
+    from stylize3d_core.stylize import StyleFeatureCache, style_feature_cache, style_tensor
+
+    encoder = StyleEncoder()
+    cache = style_feature_cache(encoder)
+    assert style_feature_cache(encoder) is cache and len(cache) == 0
+    g = np.random.default_rng(5)
+    style = g.random((40, 48, 3), dtype=np.float32)
+    cam = Cameras.identity(stylized.photo.fov_y_deg)
+    stylized._style_encoder, before = encoder, stylized._style_encoder
+    try:
+        stylized.set_style(style)
+        first = stylized.render(cam, 24, 32)
+        assert (cache.misses, cache.hits) == (1, 0)
+        stylized.set_style(style.copy())  # same pixels, another array: a hit, the same frame
+        assert (cache.misses, cache.hits) == (1, 1)
+        np.testing.assert_array_equal(stylized.render(cam, 24, 32), first)
+    finally:
+        stylized._style_encoder = before
+    # the cached maps are the encoder's own
+    with torch.inference_mode():
+        fresh = encoder(style_tensor(style)).maps
+    for m, f in zip(cache.features(style_tensor(style)).maps, fresh):
+        torch.testing.assert_close(m, f, rtol=0, atol=0)
+    # another style misses; a bfloat16 autocast is another key; the oldest entry goes first
+    small = StyleFeatureCache(encoder, size=2)
+    t1, t2, t3 = (style_tensor(g.random((32, 32, 3), dtype=np.float32)) for _ in range(3))
+    small.features(t1), small.features(t2)
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        k_bf16 = StyleFeatureCache.key(t1)
+    assert k_bf16 != StyleFeatureCache.key(t1)
+    small.features(t3)
+    assert len(small) == 2 and small.misses == 3
+    small.features(t1)  # evicted: computed again
+    assert small.misses == 4
+    with pytest.raises(InputError):
+        StyleFeatureCache(encoder, size=0)
+
+
+def test_final_points_per_pixel_keeps_a_prefix(stylized):
+    from dataclasses import replace
+
+    cam = Cameras.identity(stylized.photo.fov_y_deg)
+    before = stylized.settings
+    try:
+        full = stylized.render(cam, 12, 16)
+        stylized.settings = replace(before, final_points_per_pixel=100.0)  # more than there are: every point
+        np.testing.assert_array_equal(stylized.render(cam, 12, 16), full)
+        stylized.settings = replace(before, final_points_per_pixel=1.0, preview_points_per_pixel=1.0)
+        subset = stylized.render(cam, 12, 16)
+        # the same prefix as a preview of the same density (supersample 1), and not every point
+        np.testing.assert_array_equal(subset, stylized.render(cam, 12, 16, preview=True))
+        assert np.isfinite(subset).all() and not np.array_equal(subset, full)
+    finally:
+        stylized.settings = before
+    with pytest.raises(InputError):
+        StylizeSettings(final_points_per_pixel=0.1)
+
+
 def test_detail_transfer_moves_the_frame_to_the_style_colours(stylized):
     """A new lite model starts at the identity colour transform: a stylized frame shows the points' colours
     moved to the style's L*a*b* statistics, scaled by the strength."""

@@ -24,6 +24,7 @@ import numpy as np
 import torch
 
 from ..eval.quality import sharpness  # noqa: F401 (also this module's public name, as before)
+from ..errors import InputError
 from .report import write_table
 
 Log = Callable[[str], None]
@@ -43,6 +44,21 @@ class ConsistencyPreset:
 
 QUICK = ConsistencyPreset(photo_size=96, frame_size=64, trajectory_frames=90, frames=9)
 FULL = ConsistencyPreset(photo_size=512, frame_size=256, trajectory_frames=90, frames=30)
+
+
+SMOOTHING = 0.5
+"""Weight of the previous smoothed frame in the temporally smoothed 2D baseline."""
+
+
+def temporal_smoothing(frames: List[np.ndarray], keep: float) -> List[np.ndarray]:
+    """An exponential moving average over frames in order: ``s_t = keep * s_(t-1) + (1 - keep) * f_t``
+    (no warping: the plain temporal filter a per-frame method can add)."""
+    if not 0.0 <= keep < 1.0:
+        raise InputError("temporal smoothing", f"keep must be in [0, 1), got {keep!r}")
+    out: List[np.ndarray] = []
+    for f in frames:
+        out.append(f.copy() if not out else (keep * out[-1] + (1.0 - keep) * f).astype(f.dtype))
+    return out
 
 
 def run_consistency(out: Path, quick: bool = False, show_progress: bool = False, log: Log = _quiet,
@@ -77,10 +93,17 @@ def run_consistency(out: Path, quick: bool = False, show_progress: bool = False,
         renderer = PlainRenderer(replace(p3d.points, rgb=colours.astype(np.float32)))
         return list(renderer.frames(cams, H, W))
 
+    per_frame: List[np.ndarray] = []
+
+    def baseline() -> List[np.ndarray]:
+        per_frame[:] = baseline_frames(p3d, cams, H, W, style_rgb)
+        return list(per_frame)
+
     methods: Dict[str, Callable[[], List[np.ndarray]]] = {
         "ours": lambda: list(ours.frames(cams, H, W)),
         "plain (no style)": lambda: list(plain.frames(cams, H, W)),
-        "2D baseline per frame": lambda: baseline_frames(p3d, cams, H, W, style_rgb),
+        "2D baseline per frame": baseline,
+        f"2D baseline + temporal smoothing (EMA {SMOOTHING:g})": lambda: temporal_smoothing(per_frame, SMOOTHING),
         "stylize then bake": baked,
     }
     xyz = torch.from_numpy(p3d.points.xyz)
@@ -103,6 +126,8 @@ def run_consistency(out: Path, quick: bool = False, show_progress: bool = False,
         "short: adjacent frames; long: 7 frames apart; RMSE of colours in [0, 1] and the masked "
         "EfficientNet feature distance over co-visible pixels (lower = more consistent)",
         "style_distance: feature statistics against the style image (lower = closer); sharpness: std of "
-        "the Laplacian (higher = sharper)"])
+        "the Laplacian (higher = sharper)",
+        f"temporal smoothing: the per-frame 2D baseline's frames averaged over time (s_t = {SMOOTHING:g} s_t-1 + "
+        f"{1 - SMOOTHING:g} f_t, no warping)"])
     log(f"consistency: {len(rows)} methods, {len(cams)} frames {W}x{H}")
     return rows

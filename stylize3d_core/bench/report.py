@@ -98,8 +98,11 @@ def pareto_front(points: Sequence[Tuple[float, float]]) -> List[int]:
 
 
 def scatter_plot(path: Path, points: Sequence[Tuple[float, float]], labels: Sequence[str], xlabel: str, ylabel: str,
-                 title: str, front: Sequence[int] = (), size: Tuple[int, int] = (640, 900)) -> Path:
-    """A scatter plot PNG: every point labelled, the points of ``front`` joined by a red line."""
+                 title: str, front: Sequence[int] = (), size: Tuple[int, int] = (640, 900),
+                 log_x: bool = False) -> Path:
+    """A scatter plot PNG: every point labelled (labels moved down where they would overlap, to the left
+    near the right edge), the points of ``front`` joined by a red line; ``log_x``: a logarithmic x axis
+    (positive x only)."""
     import cv2
 
     h, w = size
@@ -107,6 +110,9 @@ def scatter_plot(path: Path, points: Sequence[Tuple[float, float]], labels: Sequ
     left, right, top, bottom = 70, 30, 40, 60
     xs = np.array([p[0] for p in points], float)
     ys = np.array([p[1] for p in points], float)
+    if log_x:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xs = np.where(xs > 0, np.log10(np.where(xs > 0, xs, 1.0)), np.nan)
     ok = np.isfinite(xs) & np.isfinite(ys)
     if not ok.any():
         xs, ys, ok = np.zeros(1), np.zeros(1), np.ones(1, bool)
@@ -128,7 +134,8 @@ def scatter_plot(path: Path, points: Sequence[Tuple[float, float]], labels: Sequ
         _, gy = px(x0, fy)
         cv2.line(img, (gx, top), (gx, h - bottom), grey, 1)
         cv2.line(img, (left, gy), (w - right, gy), grey, 1)
-        cv2.putText(img, f"{fx:.3g}", (gx - 15, h - bottom + 18), cv2.FONT_HERSHEY_SIMPLEX, 0.4, black, 1)
+        cv2.putText(img, f"{10 ** fx if log_x else fx:.3g}", (gx - 15, h - bottom + 18), cv2.FONT_HERSHEY_SIMPLEX,
+                    0.4, black, 1)
         cv2.putText(img, f"{fy:.3g}", (5, gy + 4), cv2.FONT_HERSHEY_SIMPLEX, 0.4, black, 1)
     cv2.putText(img, xlabel, (w // 2 - 80, h - 15), cv2.FONT_HERSHEY_SIMPLEX, 0.5, black, 1)
     cv2.putText(img, ylabel, (5, 25), cv2.FONT_HERSHEY_SIMPLEX, 0.5, black, 1)
@@ -136,10 +143,18 @@ def scatter_plot(path: Path, points: Sequence[Tuple[float, float]], labels: Sequ
     fr = [i for i in front if ok[i]]
     for a, b in zip(fr, fr[1:]):
         cv2.line(img, px(xs[a], ys[a]), px(xs[b], ys[b]), red, 2)
-    for i in np.flatnonzero(ok):
+    placed: List[Tuple[int, int, int]] = []  # (x0, x1, y) of the labels so far
+    for i in sorted(np.flatnonzero(ok), key=lambda j: (-ys[j], xs[j])):
         c = px(xs[i], ys[i])
         cv2.circle(img, c, 5, red if i in fr else blue, -1)
-        cv2.putText(img, str(labels[i])[:28], (c[0] + 6, c[1] - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.35, black, 1)
+        text = str(labels[i])[:32]
+        tw = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, 0.35, 1)[0][0]
+        lx = c[0] + 6 if c[0] + 6 + tw < w - 2 else c[0] - 6 - tw
+        ly = c[1] - 6
+        while any(abs(ly - py) < 11 and lx < px1 and lx + tw > px0 for px0, px1, py in placed):
+            ly += 11
+        placed.append((lx, lx + tw, ly))
+        cv2.putText(img, text, (lx, ly), cv2.FONT_HERSHEY_SIMPLEX, 0.35, black, 1)
     path = Path(path)
 
     def write(tmp: Path) -> None:

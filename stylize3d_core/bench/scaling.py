@@ -32,28 +32,25 @@ def _quiet(_: str) -> None:
     return None
 
 
-def measure(megapixels: float, frames: Sequence[int], photo: Optional[str] = None) -> List[dict]:
-    """Run in a fresh process: one photo size, every frame size; rows with seconds and peak memory."""
-    import cv2
+def measure(megapixels: float, frames: Sequence[int], photo: Optional[str] = None, repeats: int = 1) -> List[dict]:
+    """Run in a fresh process: one photo size, every frame size; rows with seconds (median of ``repeats``
+    after one warm-up) and peak memory."""
     import numpy as np
 
     from ..eval.timing import median_time, peak_rss_gib
-    from ..io.images import load_image, save_image
     from ..models.checkpoint import load_checkpoint
     from ..pipeline import PhotoSpec, load_photo3d
     from ..render.plain import PlainRenderer
-    from ..resources import resolve_model, sample_photo, style_image
+    from ..resources import resolve_model, style_image
+    from ..io.images import load_image
     from ..stylize import Stylized3DPhoto
     from ..geometry.camera import Cameras
+    from .photos import photo_at_megapixels
 
-    rgb = load_image(str(photo or sample_photo()), max_size=8192).rgb
-    h, w = rgb.shape[:2]
-    scale = math.sqrt(megapixels * 1e6 / (h * w))
-    size = (max(16, round(w * scale)), max(16, round(h * scale)))
-    big = cv2.resize(rgb, size, interpolation=cv2.INTER_CUBIC if scale > 1 else cv2.INTER_AREA)
+    import open3d.core  # noqa: F401 (the geometry's k-NN; imported before the clock starts, once per process)
+
     with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "photo.png"
-        save_image(path, np.clip(big, 0, 1))
+        path = photo_at_megapixels(megapixels, Path(tmp), photo)
         t0 = time.perf_counter()
         p3d = load_photo3d(PhotoSpec(photo=str(path), depth="prior", max_size=8192))
         t_photo = time.perf_counter() - t0
@@ -63,14 +60,16 @@ def measure(megapixels: float, frames: Sequence[int], photo: Optional[str] = Non
     t_model = time.perf_counter() - t0
     plain = PlainRenderer(p3d.points)
     cam = Cameras.create(np.array([[1, 0, 0, 0.02], [0, 1, 0, 0], [0, 0, 1, 0.02], [0, 0, 0, 1.0]]), p3d.fov_y_deg)
+    h, w = p3d.size
     rows = []
     for f in frames:
-        t_plain = median_time(lambda: plain.render(cam, f, f), 1, warmup=1)
-        t_styl = median_time(lambda: s.render(cam, f, f), 1, warmup=1)
-        rows.append({"photo_mp": round(h * w * scale * scale / 1e6, 3), "photo": f"{size[0]}x{size[1]}",
+        t_plain = median_time(lambda: plain.render(cam, f, f), repeats, warmup=1)
+        t_styl = median_time(lambda: s.render(cam, f, f), repeats, warmup=1)
+        rows.append({"photo_mp": round(h * w / 1e6, 3), "photo": f"{w}x{h}",
                      "points": len(p3d.points), "frame": f"{f}x{f}", "photo3d_s": t_photo,
-                     "model_s": t_model, "plain_ms": 1000 * t_plain, "stylized_ms": 1000 * t_styl,
-                     "peak_rss_gib": peak_rss_gib()})
+                     "model_s": t_model, "geometry_s": s.timings["geometry"], "encode_s": s.timings["encode"],
+                     "plain_ms": 1000 * t_plain, "stylized_ms": 1000 * t_styl,
+                     "stylized_ns_per_point": 1e9 * t_styl / len(p3d.points), "peak_rss_gib": peak_rss_gib()})
     return rows
 
 
@@ -82,27 +81,67 @@ def run_scaling(out: Path, quick: bool = False, show_progress: bool = False, log
     rows: List[dict] = []
     root = Path(__file__).resolve().parents[2]
     for mp in progress(list(mps), len(mps), "scaling", show_progress):
-        cmd = [sys.executable, "-m", "stylize3d_core.bench.scaling", str(mp), ",".join(map(str, frames))]
-        if photo:
-            cmd.append(str(photo))
+        cmd = [sys.executable, "-m", "stylize3d_core.bench.scaling", str(mp), ",".join(map(str, frames)),
+               "1" if quick else "3"] + ([str(photo)] if photo else [])
         done = subprocess.run(cmd, capture_output=True, text=True, cwd=root)
         if done.returncode != 0:
             rows.append({"photo_mp": mp, "photo": "failed", "points": 0, "frame": "-", "photo3d_s": math.nan,
-                         "model_s": math.nan, "plain_ms": math.nan, "stylized_ms": math.nan,
-                         "peak_rss_gib": math.nan, "error": done.stderr.strip().splitlines()[-1:]})
-            continue
-        rows.extend(json.loads(done.stdout.strip().splitlines()[-1]))
-    cols = ["photo_mp", "photo", "points", "frame", "photo3d_s", "model_s", "plain_ms", "stylized_ms",
-            "peak_rss_gib"]
-    write_table(Path(out), "scaling", "Scaling with photo and frame size", rows, cols, notes=[
-        "each photo size in a fresh process (peak_rss_gib is that process's peak, all frame sizes included); "
-        "photo3d_s: read + prior depth + LDI + points; model_s: geometry + encoding + style; one timed render "
-        "after one warm-up per frame size" + (" (--quick preset)" if quick else "")])
+                         "model_s": math.nan, "geometry_s": math.nan, "encode_s": math.nan, "plain_ms": math.nan,
+                         "stylized_ms": math.nan, "stylized_ns_per_point": math.nan, "peak_rss_gib": math.nan,
+                         "error": done.stderr.strip().splitlines()[-1:]})
+        else:
+            rows.extend(json.loads(done.stdout.strip().splitlines()[-1]))
+        _write(Path(out), rows, quick)  # after every photo size: a long run stopped early keeps what it measured
     log(f"scaling: {len(rows)} rows")
     return rows
 
 
+def _write(out: Path, rows: List[dict], quick: bool) -> None:
+    cols = ["photo_mp", "photo", "points", "frame", "photo3d_s", "model_s", "geometry_s", "encode_s", "plain_ms",
+            "stylized_ms", "stylized_ns_per_point", "peak_rss_gib"]
+    growth = growth_notes(rows)
+    ok = [r for r in rows if r["photo"] != "failed"]
+    out.mkdir(parents=True, exist_ok=True)
+    if ok:
+        from .report import scatter_plot
+
+        pts = [(r["points"] / 1e6, r["stylized_ms"]) for r in ok]
+        scatter_plot(out / "scaling.png", pts, [f"{r['photo_mp']:g} MP {r['frame']}" for r in ok],
+                     "points (millions)", "stylized ms per frame", "scaling: time per frame vs points")
+        last = {r["photo_mp"]: r for r in ok}.values()  # a process's peak: after its largest frame
+        scatter_plot(out / "scaling_memory.png", [(r["points"] / 1e6, r["peak_rss_gib"]) for r in last],
+                     [f"{r['photo_mp']:g} MP" for r in last], "points (millions)", "peak GiB",
+                     "scaling: peak memory vs points")
+    failed = [f"{r['photo_mp']:g} MP failed: {' '.join(r.get('error') or [])}" for r in rows if r["photo"] == "failed"]
+    write_table(out, "scaling", "Scaling with photo and frame size", rows, cols, notes=failed + growth + [
+        "each photo size in a fresh process (peak_rss_gib is that process's peak, all frame sizes included); "
+        "photo3d_s: read + prior depth + LDI + points; model_s: geometry + encoding + style (open3d.core "
+        "imported before); "
+        f"{'one timed render' if quick else 'median of 3 renders'} after one warm-up per frame size"
+        + (" (--quick preset)" if quick else "")])
+
+
+def growth_notes(rows: Sequence[dict]) -> List[str]:
+    """For each frame size, how the frame time and the peak memory grow against the points
+    (``x`` times the points, ``y`` times the time: linear when ``y`` is about ``x``)."""
+    notes = []
+    ok = [r for r in rows if r["photo"] != "failed"]
+    for frame in dict.fromkeys(r["frame"] for r in ok):
+        rs = sorted((r for r in ok if r["frame"] == frame), key=lambda r: r["points"])
+        if len(rs) < 2:
+            continue
+        a, b = rs[0], rs[-1]
+        notes.append(f"{frame}: {b['points'] / a['points']:.1f}x the points -> {b['plain_ms'] / a['plain_ms']:.1f}x "
+                     f"plain time, {b['stylized_ms'] / a['stylized_ms']:.1f}x stylized time")
+    if len(ok) >= 2:
+        a, b = min(ok, key=lambda r: r["points"]), max(ok, key=lambda r: r["points"])
+        notes.append(f"{b['points'] / a['points']:.1f}x the points -> {b['model_s'] / a['model_s']:.1f}x model "
+                     f"(geometry + encoding + style) time, {b['peak_rss_gib'] / a['peak_rss_gib']:.1f}x peak memory")
+    return notes
+
+
 if __name__ == "__main__":
     args = sys.argv[1:]
-    result = measure(float(args[0]), [int(x) for x in args[1].split(",")], args[2] if len(args) > 2 else None)
+    result = measure(float(args[0]), [int(x) for x in args[1].split(",")], args[3] if len(args) > 3 else None,
+                     repeats=int(args[2]))
     print(json.dumps(result))

@@ -53,7 +53,7 @@ def run_stress(out: Path, quick: bool = False, show_progress: bool = False, log:
 def run_suite(name: str, out, quick: bool = False, show_progress: bool = False, log: Log = _quiet,
               photo: Optional[str] = None, style: Optional[str] = None, model: Optional[str] = None,
               eval_data: Optional[str] = None) -> List[dict]:
-    """Run the suite ``name`` (speed, consistency, scaling, stress, skips, quality) and write its tables to ``out``.
+    """Run the suite ``name`` (speed, consistency, scaling, stress, skips, targets, floor, quality) and write its tables to ``out``.
 
     ``model`` and ``eval_data`` are used by ``quality`` only (the checkpoint measured, default the shipped
     one; a held-out dataset folder for the stage-1 PSNR / SSIM)."""
@@ -74,8 +74,16 @@ def run_suite(name: str, out, quick: bool = False, show_progress: bool = False, 
         from .scaling import run_scaling
 
         return run_scaling(Path(out), quick, show_progress, log, photo=photo)
+    if name == "targets":
+        from .targets import run_targets
+
+        return run_targets(Path(out), quick, show_progress, log, photo=photo)
+    if name == "floor":
+        from .floor import run_floor
+
+        return run_floor(Path(out), quick, show_progress, log, photo=photo)
     if name == "quality":
         from .quality import run_quality
 
         return run_quality(Path(out), quick, show_progress, log, model=model, eval_data=eval_data)
-    raise InputError("suite", f"must be one of speed, consistency, scaling, stress, skips, quality; got {name!r}")
+    raise InputError("suite", f"must be one of speed, consistency, scaling, stress, skips, targets, floor, quality; got {name!r}")

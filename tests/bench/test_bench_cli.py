@@ -27,6 +27,13 @@ def test_bench_speed_quick(tmp_path):
     assert all(isinstance(r["psnr_db"], float) and r["perceptual"] > 0 for r in lossy)
     assert any(r["pareto"] for r in rows)
     assert cv2.imread(str(tmp_path / "speed.png")) is not None
+    picks = {r["use"]: r for r in _table(tmp_path, "speed_choices")["rows"]}
+    assert set(picks) == {"viewer preview", "viewer final frame", "export default"}
+    by_name = {r["variant"]: r for r in rows}
+    for use, target in (("viewer preview", 30), ("export default", 40)):
+        chosen = by_name[picks[use]["variant"]]
+        assert chosen["psnr_db"] == "inf" or chosen["psnr_db"] >= target
+    assert by_name[picks["export default"]["variant"]]["knob"] not in ("resolution", "threads", "bfloat16")
 
 
 def test_bench_skips_quick(tmp_path):
@@ -34,7 +41,10 @@ def test_bench_skips_quick(tmp_path):
     rows = {r["change"]: r for r in _table(tmp_path, "skips")["rows"]}
     assert rows["strength only"]["holds"] and rows["strength only"]["max_abs_diff"] < 1e-5
     assert rows["photo without depth edges"]["holds"]
-    assert rows["photo only"]["holds"] is False
+    assert rows["photo only"]["holds"] and rows["photo only"]["max_abs_diff"] == 0  # the style-feature cache
+    assert rows["photo only"]["with_skip_s"] < rows["photo only"]["without_s"]
+    budget = next(r for k, r in rows.items() if "points per pixel" in k)
+    assert budget["holds"] and isinstance(budget["psnr_db"], float)
 
 
 def test_bench_stress_quick(tmp_path):
@@ -48,3 +58,15 @@ def test_bench_stress_quick(tmp_path):
 def test_bench_bad_suite(capsys):
     with pytest.raises(SystemExit):
         main(["bench", "nonsense"])
+
+
+def test_bench_targets_quick(tmp_path):
+    assert main(["bench", "targets", "--quick", "-q", "--out", str(tmp_path)]) == 0
+    rows = _table(tmp_path, "targets")["rows"]
+    assert [r["target"] for r in rows] == [">= 30 fps", "<= 150 ms", "<= 150 ms", "<= 15 s", "<= 3 s", ">= 40 dB", ">= 30 dB",
+                                           "<= 6 GiB"]
+    for r in rows:
+        value = float(r["measured"])
+        assert value > 0
+        bound = float(r["target"].split()[1])
+        assert r["met"] == (value >= bound if r["target"].startswith(">=") else value <= bound)
