@@ -5,6 +5,7 @@ from pathlib import Path
 import pytest
 import torch
 
+from stylize3d_core.models.decoder import identity_transform
 from stylize3d_core.models.checkpoint import save_checkpoint
 from stylize3d_core.models.stylize3d import ModelConfig, Stylize3DModel
 
@@ -14,7 +15,11 @@ def untrained(tmp_path_factory) -> Path:
     """An untrained lite checkpoint (a model whose outputs tests can compare, not judge)."""
     torch.manual_seed(0)
     path = tmp_path_factory.mktemp("model") / "untrained.safetensors"
-    save_checkpoint(path, Stylize3DModel(ModelConfig.lite()), 1, {"note": "untrained, for tests"})
+    model = Stylize3DModel(ModelConfig.lite())
+    # a zero colour transform: the untrained U-Net's own colours, visibly not the plain render (a new model
+    # starts at the identity transform, which shows the points' colours)
+    identity_transform(model.decoder.transform, False)
+    save_checkpoint(path, model, 1, {"note": "untrained, for tests"})
     return path
 
 

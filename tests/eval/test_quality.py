@@ -356,6 +356,7 @@ def test_stage1_scores_beside_the_plain_render(tmp_path):
     import dataclasses
 
     from stylize3d_core.eval.quality import plain_view_scores, stage1_scores
+    from stylize3d_core.models.decoder import identity_transform
     from stylize3d_core.models.stylize3d import ModelConfig, Stylize3DModel
     from stylize3d_core.train.cache import build_dataset
     from stylize3d_core.train.data import DataConfig
@@ -363,14 +364,19 @@ def test_stage1_scores_beside_the_plain_render(tmp_path):
     small = DataConfig(image_size=(32, 40), scene_textures=3, texture_size=32, procedural_fraction=0.0)
     build_dataset(tmp_path / "ldi", 1, small, seed=3)
     torch.manual_seed(0)
-    scores = stage1_scores(Stylize3DModel(ModelConfig.lite()), tmp_path / "ldi")
+    model = Stylize3DModel(ModelConfig.lite())
+    scores = stage1_scores(model, tmp_path / "ldi")
     assert set(scores) == {"ldi"}
     s = scores["ldi"]
     assert s["n_views"] == 2 and all(math.isfinite(v) for v in s.values())
     assert s["gap_db"] == pytest.approx(s["plain_psnr"] - s["model_psnr"])
-    # the pseudo views are renders of the sample's own points: the plain render is close to them,
-    # an untrained model far from them
-    assert s["plain_psnr"] > 25 and s["plain_psnr"] > s["model_psnr"] + 5
+    # the pseudo views are renders of the sample's own points: the plain render is close to them, and so
+    # is a new model (its colour transform starts at the identity: the points' colours) ...
+    assert s["plain_psnr"] > 25 and abs(s["gap_db"]) < 1.0
+    # ... but not an untrained U-Net's own colours
+    identity_transform(model.decoder.transform, False)
+    u = stage1_scores(model, tmp_path / "ldi")["ldi"]
+    assert u["plain_psnr"] > u["model_psnr"] + 5
     assert plain_view_scores(tmp_path / "ldi")["procedural"] is None
     with pytest.raises(InputError):
         stage1_scores(Stylize3DModel(ModelConfig.lite()), tmp_path / "missing")
