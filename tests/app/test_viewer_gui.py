@@ -335,7 +335,7 @@ def test_real_events_second_drag_shows_frames_esc_and_close_during_export(displa
         {"op": "sleep", "seconds": 6.0},  # the test drags twice now
         {"op": "wait_idle", "timeout": 120},
         {"op": "status"},
-        {"op": "set_export", "frames": 24, "size": 128, "fps": 8},
+        {"op": "set_export", "frames": 120, "size": 160, "fps": 8},  # long enough for Esc to land during it
         {"op": "export", "path": str(out / "clip.mp4"), "wait": False},
         {"op": "sleep", "seconds": 2.0},  # the test presses Esc now
         {"op": "status"},
