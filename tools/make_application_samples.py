@@ -10,7 +10,7 @@ Writes to ``--out``:
   procedural scene ray-cast from three poses (``eval/multiview.py``).
 
 With ``--figures``, renders one figure per application (the shipped lite model,
-a shipped style): ``apps_multiview.png``, ``apps_layered.png``,
+a shipped style): ``apps_multiview.png``, ``apps_layered.png``, ``apps_layered_person.png``,
 ``apps_stereo_card.png``, ``apps_exports.png``.
 """
 
@@ -38,7 +38,7 @@ from stylize3d_core.models.checkpoint import load_checkpoint  # noqa: E402
 from stylize3d_core.multiview import save_views  # noqa: E402
 from stylize3d_core.pipeline import DEFAULT_MODEL, PhotoSpec, load_photo3d  # noqa: E402
 from stylize3d_core.render.plain import PlainRenderer  # noqa: E402
-from stylize3d_core.scene.masks import grabcut_mask, point_mask  # noqa: E402
+from stylize3d_core.scene.masks import grabcut_mask, person_mask, point_mask  # noqa: E402
 from stylize3d_core.scene.multiview import merge_views, pose_in_view  # noqa: E402
 from stylize3d_core.scene.photo3d import Photo3D, Photo3DSettings  # noqa: E402
 from stylize3d_core.scene.pointcloud import PointCloud  # noqa: E402
@@ -90,6 +90,18 @@ def layered_figure(ck, style, out: Path) -> None:
                           layered.render(cam, h, w)]))
 
 
+def person_figure(ck, style, out: Path) -> None:
+    """The astronaut: the automatic person mask over the photo (red), fully stylized, layered with it."""
+    p3d = load_photo3d(PhotoSpec(photo=str(ROOT / "assets/samples/astronaut.jpg"), max_size=256))
+    mask = person_mask(p3d.rgb)
+    s = _stylized(p3d, ck, style)
+    layered = LayeredRenderer(p3d, point_mask(p3d.ldi, mask), s)
+    cam = Cameras.identity(p3d.fov_y_deg)
+    h, w = p3d.size
+    tinted = np.where(mask[..., None], 0.5 * p3d.rgb + 0.5 * np.array([1.0, 0.0, 0.0], np.float32), p3d.rgb)
+    save_image(out, _row([tinted, s.render(cam, h, w), layered.render(cam, h, w)], height=256))
+
+
 def card_figure(ck, style, card: np.ndarray, out: Path) -> None:
     found = card_depth(card)
     d = found.depth_map.depth
@@ -138,6 +150,7 @@ def main() -> None:
         style = load_image(STYLE, max_size=512).rgb
         multiview_figure(ck, style, fig / "apps_multiview.png")
         layered_figure(ck, style, fig / "apps_layered.png")
+        person_figure(ck, style, fig / "apps_layered_person.png")
         card_figure(ck, style, card, fig / "apps_stereo_card.png")
         exports_figure(ck, style, fig / "apps_exports.png")
         print("wrote figures to", fig)
