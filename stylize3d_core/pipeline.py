@@ -87,7 +87,8 @@ class PhotoSpec:
 EXPORT_POINTS_PER_PIXEL = 6.0
 """The export default of ``StylizeSettings.final_points_per_pixel`` (``RenderJob.points_per_pixel``), picked
 from ``stylize3d bench speed``: at 512 px from a 1 MP photo (about 10 points per pixel) it is faster than
-every point and 47 dB PSNR from it (the final-frame target is 40 dB)."""
+every point and 41 dB PSNR from it with the version-4 model (47 dB with version 1; ``bench targets``; the
+final-frame target is 40 dB)."""
 
 
 @documented
@@ -113,8 +114,8 @@ class RenderJob:
                                    "camera moves away).")
     points_per_pixel: float = option(EXPORT_POINTS_PER_PIXEL, low=0.5, high=100.0,
                                      help="stylized frames keep about this many points per output pixel where more "
-                                          "would land on each (a random subset; faster, 47 dB PSNR from every "
-                                          "point at the default: stylize3d bench speed); 100 keeps nearly all.")
+                                          "would land on each (a random subset; faster, 41 dB PSNR from every "
+                                          "point at the default: stylize3d bench targets); 100 keeps nearly all.")
     camera_path: Optional[str] = option(None, metavar="JSON",
                                         help="follow the cameras of this camera-path JSON instead of "
                                              "trajectory/frames.")

@@ -207,7 +207,7 @@ class ViewerSession:
 
         if self._style_encoder is None:
             self._style_encoder = StyleEncoder()
-        # full frames and exports keep the export default's point budget (Pareto-chosen by `bench speed`: 47 dB
+        # full frames and exports keep the export default's point budget (Pareto-chosen by `bench speed`: 41 dB
         # against every point); previews their own smaller one
         settings = StylizeSettings(strength=self.strength, final_points_per_pixel=EXPORT_POINTS_PER_PIXEL)
         s = Stylized3DPhoto(self.photo, ck, settings, style_encoder=self._style_encoder)

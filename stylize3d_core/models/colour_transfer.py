@@ -13,9 +13,9 @@ per L*, a*, b* channel, with ``mean_c, std_c`` over the photo's points,
 (0: the colours are unchanged). The gain of L* is at least
 :data:`MIN_LIGHTNESS_GAIN` (1): a style with less lightness contrast than the
 photo takes its palette and mean lightness, but the photo keeps its contrast,
-i.e. its detail (measured on the held-out pairs of ``stylize3d bench quality``:
-sharpness 0.57x -> 0.89x the plain render, Lab distance 1.39x -> 1.97x the 2D
-network's, at strength 1 and before any training of the colour transform). Being a per-point recolouring it is the same
+i.e. its detail (held-out pairs of ``stylize3d bench quality --quick``, strength
+1, before the gamut mapping: sharpness 0.57x -> 0.89x the plain render, Lab
+distance 1.39x -> 1.97x the 2D network's; ``docs/quality.md``). Being a per-point recolouring it is the same
 in every view (consistent by construction) and keeps every edge of the photo;
 the learned model adds the style's texture and local colour on top. Colours
 that land outside the sRGB gamut keep their lightness and hue and lose chroma
