@@ -32,7 +32,7 @@ import time
 import weakref
 from collections import OrderedDict
 from dataclasses import dataclass
-from typing import Callable, Dict, Iterator, List, Optional, Tuple
+from typing import Callable, Dict, Iterator, Optional, Tuple
 
 import numpy as np
 import torch
@@ -144,18 +144,6 @@ def style_feature_cache(encoder: StyleEncoder) -> StyleFeatureCache:
     if cache is None:
         cache = _CACHES[encoder] = StyleFeatureCache(encoder)
     return cache
-
-
-def _stop_hooks(decoder: torch.nn.Module, should_stop: Callable[[], bool]) -> List:
-    """Forward pre-hooks on the decoder's levels and output layers that raise
-    :class:`RenderInterrupted` once ``should_stop()`` is True (the caller removes them)."""
-    def check(_module, _inputs):
-        if should_stop():
-            raise RenderInterrupted("render stopped inside the decoder")
-
-    stages = [m for name in ("skips", "downs", "ups") for m in getattr(decoder, name, [])]
-    stages += [getattr(decoder, name) for name in ("out_conv", "out_rgb") if hasattr(decoder, name)]
-    return [m.register_forward_pre_hook(check) for m in stages]
 
 
 class Stylized3DPhoto:
@@ -298,8 +286,8 @@ class Stylized3DPhoto:
 
         ``should_stop`` (any thread may make it return True) is checked between
         the stages: before rasterizing, between chunks of points while
-        rasterizing (:data:`~stylize3d_core.render.rasterize.CHUNK_POINTS`), before each level of the decoder and
-        before its output layers; when it returns True the render stops with
+        rasterizing (:data:`~stylize3d_core.render.rasterize.CHUNK_POINTS`), and between the strips of rows of
+        every decoder convolution (:func:`~stylize3d_core.models.decoder.conv_in_strips`); when it returns True the render stops with
         :class:`~stylize3d_core.errors.RenderInterrupted` (nothing is cached
         from a stopped render).
         """
@@ -314,17 +302,12 @@ class Stylized3DPhoto:
             per_pixel = self.settings.final_points_per_pixel
             keep = n if per_pixel is None else self._strata.prefix(
                 preview_point_count(n, height * ss, width * ss, per_pixel))
-        hooks = _stop_hooks(self.model.decoder, should_stop) if should_stop is not None else []
-        try:
-            with torch.inference_mode():
-                if should_stop is not None and should_stop():
-                    raise RenderInterrupted("render stopped before rasterizing")
-                rgb, _ = self.model.render_view(self._dense[:keep], self._xyz[:keep], camera, height, width,
-                                                supersample=ss, should_stop=should_stop)
-                rgb = torch.nan_to_num(rgb.float(), nan=0.0).clamp_(0.0, 1.0)  # float32 after a bfloat16 autocast
-        finally:
-            for h in hooks:
-                h.remove()
+        with torch.inference_mode():
+            if should_stop is not None and should_stop():
+                raise RenderInterrupted("render stopped before rasterizing")
+            rgb, _ = self.model.render_view(self._dense[:keep], self._xyz[:keep], camera, height, width,
+                                            supersample=ss, should_stop=should_stop)
+            rgb = torch.nan_to_num(rgb.float(), nan=0.0).clamp_(0.0, 1.0)  # float32 after a bfloat16 autocast
         return rgb.permute(1, 2, 0).contiguous().numpy()
 
     def frames(self, cameras: Cameras, height: int, width: int) -> Iterator[np.ndarray]:

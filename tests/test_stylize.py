@@ -61,7 +61,7 @@ def test_frames_and_bad_input(stylized):
 
 
 def test_render_stops_between_stages_when_asked(stylized):
-    """``should_stop`` is checked before rasterizing and before each decoder level."""
+    """``should_stop`` is checked before rasterizing, inside the rasterizer and between the decoder's strips."""
     from stylize3d_core.errors import RenderInterrupted
 
     s = stylized
@@ -85,7 +85,7 @@ def test_render_stops_between_stages_when_asked(stylized):
     calls.clear()
     full = s.render(cam, 32, 48, should_stop=lambda: calls.append(1) and False)
     assert len(calls) > 3  # checked at every stage
-    assert (full == s.render(cam, 32, 48)).all()  # the hooks are gone and change nothing
+    assert (full == s.render(cam, 32, 48)).all()  # checking changes nothing
     assert not s.model.decoder.out_rgb._forward_pre_hooks
 
 
