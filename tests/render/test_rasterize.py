@@ -301,24 +301,31 @@ def test_image_is_channels_last_view():
 # ----------------------------------------------------------------------------- against the reference
 
 
+def assert_matches_reference(pts, feats, K, settings, generator, point_size=None):
+    """The fast rasterizer equals the reference in every output and in the features' gradient (float64);
+    returns the fast fragments."""
+    feats_a = feats.clone().requires_grad_(True)
+    feats_b = feats.clone().requires_grad_(True)
+    fast = rasterize_points(pts, feats_a, K, settings, point_size=point_size)
+    ref = rasterize_points_reference(pts, feats_b, K, settings, point_size=point_size)
+    assert torch.allclose(fast.image, ref.image, atol=1e-12)
+    assert torch.allclose(fast.weight, ref.weight, atol=1e-12)
+    assert torch.equal(fast.depth, ref.depth) and torch.equal(fast.hole, ref.hole)
+    upstream = torch.randn(tuple(fast.image.shape), dtype=F64, generator=generator)
+    (fast.image * upstream).sum().backward()
+    (ref.image * upstream).sum().backward()
+    assert torch.allclose(feats_a.grad, feats_b.grad, atol=1e-12)
+    return fast
+
+
 @pytest.mark.parametrize("supersample", [1, 2])
 @pytest.mark.parametrize("seed", range(4))
 def test_matches_reference_forward_and_backward(supersample, seed):
     H, W = 7, 9
     pts, feats, K = random_scene(H, W, 90, 4, seed)
     settings = RasterSettings(H, W, supersample=supersample)
-    feats_a = feats.clone().requires_grad_(True)
-    feats_b = feats.clone().requires_grad_(True)
-    fast = rasterize_points(pts, feats_a, K, settings)
-    ref = rasterize_points_reference(pts, feats_b, K, settings)
-    assert torch.allclose(fast.image, ref.image, atol=1e-12)
-    assert torch.allclose(fast.weight, ref.weight, atol=1e-12)
-    assert torch.equal(fast.depth, ref.depth) and torch.equal(fast.hole, ref.hole)
+    fast = assert_matches_reference(pts, feats, K, settings, torch.Generator().manual_seed(seed))
     assert 0 < fast.hole.sum() < H * W  # the scene has both holes and surface
-    upstream = torch.randn(4, H, W, dtype=F64, generator=torch.Generator().manual_seed(seed))
-    (fast.image * upstream).sum().backward()
-    (ref.image * upstream).sum().backward()
-    assert torch.allclose(feats_a.grad, feats_b.grad, atol=1e-12)
 
 
 @pytest.mark.parametrize("channels", [3, 20])
@@ -522,17 +529,7 @@ def test_grown_splats_match_reference_forward_and_backward(supersample, seed):
     sizes = footprint(pts, K, 0.5 + 3.5 * torch.rand(pts.shape[0], generator=g, dtype=F64))  # 0.5 .. 4 px
     sizes = sizes.nan_to_num(0.01)
     settings = RasterSettings(H, W, supersample=supersample)
-    feats_a = feats.clone().requires_grad_(True)
-    feats_b = feats.clone().requires_grad_(True)
-    fast = rasterize_points(pts, feats_a, K, settings, point_size=sizes)
-    ref = rasterize_points_reference(pts, feats_b, K, settings, point_size=sizes)
-    assert torch.allclose(fast.image, ref.image, atol=1e-12)
-    assert torch.allclose(fast.weight, ref.weight, atol=1e-12)
-    assert torch.equal(fast.depth, ref.depth) and torch.equal(fast.hole, ref.hole)
-    upstream = torch.randn(3, H, W, dtype=F64, generator=g)
-    (fast.image * upstream).sum().backward()
-    (ref.image * upstream).sum().backward()
-    assert torch.allclose(feats_a.grad, feats_b.grad, atol=1e-12)
+    assert_matches_reference(pts, feats, K, settings, g, point_size=sizes)
 
 
 def test_grown_splat_known_weights_and_unit_footprint_is_bilinear(raster):
@@ -714,24 +711,14 @@ def test_blend_coverage_matches_reference_and_chunks(supersample, soft_edges, se
     settings = RasterSettings(H, W, supersample=supersample, soft_edges=soft_edges, blend_coverage=True)
     blended = 0
     for size in (None, sizes):
-        feats_a = feats.clone().requires_grad_(True)
-        feats_b = feats.clone().requires_grad_(True)
-        fast = rasterize_points(pts, feats_a, K, settings, point_size=size)
-        ref = rasterize_points_reference(pts, feats_b, K, settings, point_size=size)
-        assert torch.allclose(fast.image, ref.image, atol=1e-12)
-        assert torch.allclose(fast.weight, ref.weight, atol=1e-12)
-        assert torch.equal(fast.depth, ref.depth) and torch.equal(fast.hole, ref.hole)
-        upstream = torch.randn(3, H, W, dtype=F64, generator=g)
-        (fast.image * upstream).sum().backward()
-        (ref.image * upstream).sum().backward()
-        assert torch.allclose(feats_a.grad, feats_b.grad, atol=1e-12)
+        fast = assert_matches_reference(pts, feats, K, settings, g, point_size=size)
         with torch.inference_mode():
             one = rasterize_points(pts, feats, K, settings, point_size=size)
             chunked = rasterize_points(pts, feats, K, settings, point_size=size, chunk_points=7,
                                        should_stop=lambda: False)
         for a, b in zip(one, chunked):
             assert torch.equal(a, b)  # to the bit
-        assert torch.allclose(one.image, ref.image, atol=1e-12)
+        assert torch.allclose(one.image, fast.image, atol=1e-12)  # the inference path too (fast == reference)
         plain = rasterize_points(pts, feats, K, dataclasses.replace(settings, blend_coverage=False), point_size=size)
         blended += int((~torch.isclose(plain.image, fast.image, atol=1e-9)).any(0).sum())
     if supersample == 1:
