@@ -373,7 +373,7 @@ class UNetDecoder(nn.Module):
         if self.config.supersample:
             features, mask = supersample_pool(features, mask)
         h, w = features.shape[-2:]
-        colours = features[:, features.shape[1] - self.config.transform_channels:]
+        colours = features[:, -self.config.transform_channels:] if self.transform is not None else None
         x = _assemble(features, mask, 2**self.config.levels, self.config.channels_last, should_stop)  # (B, C_in+1, Hp, Wp)
         skips: List[torch.Tensor] = []
         for skip, down in zip(self.skips, self.downs):
