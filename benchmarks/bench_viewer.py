@@ -437,6 +437,11 @@ def window(model: str, megapixels: float, tmp: str, max_size: int, repeats: int,
 
 
 def main() -> None:
+    import os
+    import tempfile
+
+    # the benchmark's photos (temporary files) must not land in the user's recent files
+    os.environ.setdefault("STYLIZE3D_CONFIG_DIR", tempfile.mkdtemp(prefix="stylize3d_bench_config_"))
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--threads", type=int, default=1, help="torch threads (the viewer's default is 1)")
     parser.add_argument("--frames", type=int, default=40, help="camera positions along the orbit")
