@@ -25,6 +25,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any, Mapping, NamedTuple, Tuple
 
@@ -33,7 +34,7 @@ import torch
 from ..checks import check_finite, check_shape
 from ..errors import InputError
 from ..geometry.ndc import NDCParams, ndc_params, to_ndc
-from ..points import IDWWeights, ball_query, farthest_point_sample, idw_neighbours
+from ..points import IDWWeights, KNNIndex, KNNResult, ball_from_knn, farthest_point_sample, idw_from_knn
 
 REFERENCE_POINTS_ACROSS = 512
 """Points across the long side of the clouds the published encoder radii were set for (512 x 512 photos)."""
@@ -188,6 +189,27 @@ def build_hierarchy(
         :class:`PointHierarchy`; a level of n points has ``max(1, n // factor)``
         points at the next level, so any N >= 1 works.
     """
+    return _build_hierarchy(xyz_ndc, config, scale)[0]
+
+
+def _fps_level(prev: torch.Tensor, factor: int, fps_start: int) -> torch.Tensor:
+    """FPS indices of the next level of ``prev`` (n, 3): ``max(1, n // factor)`` of them."""
+    m = max(1, prev.shape[0] // factor)
+    return farthest_point_sample(prev, m, start=min(fps_start, prev.shape[0] - 1))  # (m,)
+
+
+def _build_hierarchy(
+    xyz_ndc: torch.Tensor, config: NeighbourhoodConfig, scale: float
+) -> Tuple[PointHierarchy, KNNIndex]:
+    """:func:`build_hierarchy`, plus the k-d tree of its coarsest level (for the upsampling search).
+
+    Every ball query is a k-NN search plus a radius mask (:func:`~stylize3d_core.points.ball_from_knn`),
+    and each level's centres are some of the previous level's points, so one k-NN search of
+    each level among itself gives both its own balls (the stem's, or the stage's ``same``
+    balls) and, by rows, the next stage's ``down`` balls: three searches instead of five for
+    the default two stages, the same indices. The FPS of the next level (``fpsample``
+    releases the GIL) runs in a worker thread while the level's k-NN search runs.
+    """
     if not isinstance(config, NeighbourhoodConfig):
         raise InputError("config", f"expected a NeighbourhoodConfig, got {type(config).__name__}")
     stem_radius, stage_radii = config.radii(scale)
@@ -197,21 +219,33 @@ def build_hierarchy(
     if not torch.is_floating_point(xyz_ndc):
         raise InputError("xyz_ndc", f"expected a floating-point tensor, got {xyz_ndc.dtype}")
     check_finite(xyz_ndc, "xyz_ndc")
-    with torch.no_grad():
+    k = config.k
+    with torch.no_grad(), ThreadPoolExecutor(max_workers=1) as pool:
         xyz = xyz_ndc.detach().to(device="cpu", dtype=torch.float32).clone()  # (N, 3)
         levels = [xyz]
-        stem = ball_query(xyz, xyz, stem_radius, config.k).idx  # (N, k)
         samples, down, same = [], [], []
-        for factor, (r_down, r_same) in zip(config.downsample, stage_radii):
-            prev = levels[-1]  # (n, 3)
-            m = max(1, prev.shape[0] // factor)
-            idx = farthest_point_sample(prev, m, start=min(config.fps_start, prev.shape[0] - 1))  # (m,)
-            cur = prev.index_select(0, idx)  # (m, 3)
+        radius = stem_radius  # of the balls of the current level among itself
+        stem = None
+        for s in range(config.num_stages + 1):
+            cur = levels[-1]  # (n, 3)
+            fps = pool.submit(_fps_level, cur, config.downsample[s], config.fps_start) if s < config.num_stages else None
+            index = KNNIndex(cur)
+            self_knn = index.knn(cur, k)  # (n, k) of the level among itself
+            balls = ball_from_knn(self_knn, radius, index.num_points).idx  # (n, k)
+            if s == 0:
+                stem = balls
+            else:
+                same.append(balls)
+            if fps is None:
+                break
+            idx = fps.result()  # (m,)
+            r_down, radius = stage_radii[s]
+            rows = KNNResult(self_knn.idx.index_select(0, idx), self_knn.sq_dist.index_select(0, idx))  # (m, k)
             samples.append(idx)
-            down.append(ball_query(prev, cur, r_down, config.k).idx)  # (m, k) into prev
-            same.append(ball_query(cur, cur, r_same, config.k).idx)  # (m, k) into cur
-            levels.append(cur)
-    return PointHierarchy(tuple(levels), stem, tuple(samples), tuple(down), tuple(same), config, float(scale))
+            down.append(ball_from_knn(rows, r_down, index.num_points).idx)  # (m, k) into cur
+            levels.append(cur.index_select(0, idx))  # (m, 3)
+    hierarchy = PointHierarchy(tuple(levels), stem, tuple(samples), tuple(down), tuple(same), config, float(scale))
+    return hierarchy, index
 
 
 class SceneGeometry(NamedTuple):
@@ -274,8 +308,8 @@ def prepare_geometry(
         n = xyz.shape[0]
         idx = encoder_subset(n, config.max_points, seed)
         scale = radius_scale(image_size, idx.numel(), n, config.reference_points_across)
-        hierarchy = build_hierarchy(ndc.index_select(0, idx), config, scale)
-        up = idw_neighbours(ndc, hierarchy.xyz[-1], config.upsample_k)
+        hierarchy, coarsest = _build_hierarchy(ndc.index_select(0, idx), config, scale)
+        up = idw_from_knn(coarsest.knn(ndc, config.upsample_k), coarsest.num_points)  # = idw_neighbours(ndc, ...)
     return SceneGeometry(xyz, rgb.detach().float(), params, idx, hierarchy, up)
 
 

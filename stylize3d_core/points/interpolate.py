@@ -23,7 +23,7 @@ import torch
 
 from ..checks import check_finite, check_shape
 from ..errors import InputError
-from .neighbours import knn
+from .neighbours import KNNResult, knn
 
 IDW_EPS = 1e-8
 """Distance added before inverting, and the distance under which points coincide."""
@@ -67,13 +67,20 @@ def idw_neighbours(dense: torch.Tensor, sparse: torch.Tensor, k: int = 3) -> IDW
     Returns:
         :class:`IDWWeights` with ``idx`` (N, k) and ``weight`` (N, k) float32.
     """
-    res = knn(sparse, dense, k)  # (N, k) each
+    return idw_from_knn(knn(sparse, dense, k), sparse.shape[0])
+
+
+def idw_from_knn(res: KNNResult, num_sparse: int) -> IDWWeights:
+    """The IDW weights of :func:`idw_neighbours` from its k-NN search ``res`` among ``num_sparse`` points.
+
+    For a search made elsewhere (a :class:`~stylize3d_core.points.neighbours.KNNIndex` reused
+    across queries): ``idw_from_knn(knn(sparse, dense, k), len(sparse)) == idw_neighbours(dense, sparse, k)``.
+    """
     k = res.idx.shape[1]
     dist = res.sq_dist.double().clamp_min(0.0).sqrt()  # (N, k)
     weight = idw_weights(dist)  # (N, k) float64
-    m = sparse.shape[0]
-    if m < k:
-        real = torch.arange(k) < m  # (k,)
+    if num_sparse < k:
+        real = torch.arange(k) < num_sparse  # (k,)
         weight = torch.where(real, weight, torch.zeros_like(weight))
         weight = weight / weight.sum(dim=1, keepdim=True)  # row sums >= weight[:, 0] > 0
     return IDWWeights(res.idx, weight.float())

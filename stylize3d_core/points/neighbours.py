@@ -76,19 +76,80 @@ def _as_f32_array(points: torch.Tensor, name: str, allow_empty: bool = False) ->
     return np.ascontiguousarray(points.detach().cpu().numpy(), dtype=np.float32)
 
 
-def _knn_arrays(source: np.ndarray, query: np.ndarray, k: int) -> KNNResult:
-    """k-NN on validated float32 arrays; ``k`` must be <= len(source)."""
-    import open3d.core as o3c  # the tensor core only; no GUI module is used
+class KNNIndex:
+    """A k-d tree over fixed ``source`` points, built once and queried any number of times.
 
-    nns = o3c.nns.NearestNeighborSearch(o3c.Tensor(source))
-    if not nns.knn_index():
-        raise RuntimeError("Open3D could not build a k-d tree index")
-    idx, sq_dist = nns.knn_search(o3c.Tensor(query), k)
-    # Copy out of Open3D's memory: a torch tensor still viewing it at interpreter
-    # exit makes Open3D print a memory-leak warning.
-    idx_t = torch.from_numpy(idx.numpy().astype(np.int64, copy=True))  # (M, k)
-    d_t = torch.from_numpy(sq_dist.numpy().astype(np.float32, copy=True))  # (M, k)
-    return KNNResult(idx_t.reshape(len(query), k), d_t.reshape(len(query), k))
+    :func:`knn` and :func:`ball_query` build one per call; code that searches the
+    same points several times (the encoder's hierarchy: each level among itself,
+    then the next level and the dense points among it) builds it once. A query's
+    answer depends only on the tree and the query point, so searching a subset
+    of the queries gives the rows of the whole search (``knn(s, q)[i] ==
+    knn(s, q[i])``).
+
+    Args:
+        source: (N, 3) finite points, N >= 1 (validated and copied to float32 once).
+    """
+
+    def __init__(self, source: torch.Tensor) -> None:
+        self._build(_as_f32_array(source, "source"))
+
+    @classmethod
+    def _from_array(cls, source: np.ndarray) -> "KNNIndex":
+        index = cls.__new__(cls)
+        index._build(source)
+        return index
+
+    def _build(self, source: np.ndarray) -> None:
+        """Build the tree over validated (N, 3) float32 ``source``."""
+        import open3d.core as o3c  # the tensor core only; no GUI module is used
+
+        self._src = source
+        self.num_points = len(self._src)
+        self._o3c = o3c
+        self._nns = o3c.nns.NearestNeighborSearch(o3c.Tensor(self._src))
+        if not self._nns.knn_index():
+            raise RuntimeError("Open3D could not build a k-d tree index")
+
+    def knn(self, query: torch.Tensor, k: int) -> KNNResult:
+        """The ``k`` nearest source points of each ``query`` point (M, 3): as :func:`knn`."""
+        return self._search(_as_f32_array(query, "query", allow_empty=True), check_count(k, "k", 1))
+
+    def _search(self, qry: np.ndarray, k: int) -> KNNResult:
+        """k-NN of validated (M, 3) float32 queries, ``k`` >= 1."""
+        if len(qry) == 0:
+            return KNNResult(torch.zeros(0, k, dtype=torch.long), torch.zeros(0, k))
+        k_eff = min(k, self.num_points)
+        idx, sq_dist = self._nns.knn_search(self._o3c.Tensor(qry), k_eff)
+        # Copy out of Open3D's memory: a torch tensor still viewing it at interpreter
+        # exit makes Open3D print a memory-leak warning.
+        idx_t = torch.from_numpy(idx.numpy().astype(np.int64)).reshape(len(qry), k_eff)  # (M, k_eff)
+        d_t = torch.from_numpy(sq_dist.numpy().astype(np.float32, copy=True)).reshape(len(qry), k_eff)
+        if k_eff == k:
+            return KNNResult(idx_t, d_t)
+        pad = k - k_eff
+        idx_t = torch.cat([idx_t, idx_t[:, :1].expand(-1, pad)], dim=1)  # (M, k)
+        d_t = torch.cat([d_t, d_t[:, :1].expand(-1, pad)], dim=1)  # (M, k)
+        return KNNResult(idx_t, d_t)
+
+    def ball_query(self, query: torch.Tensor, radius: float, k: int) -> BallQueryResult:
+        """Up to ``k`` nearest source points within ``radius`` of each query point: as :func:`ball_query`."""
+        r = check_range(radius, "radius", 0.0, float("inf"), inclusive=False)
+        return ball_from_knn(self.knn(query, k), r, self.num_points)
+
+
+def ball_from_knn(res: KNNResult, radius: float, num_source: int) -> BallQueryResult:
+    """The ball query of radius ``radius`` (> 0) from a k-NN result among ``num_source`` points.
+
+    A ball query is a k-NN search plus a mask, so one k-NN result serves every
+    radius (and the rows of any subset of its queries: ``ball_from_knn(res[i], r)``
+    is the ball query of the queries ``i``).
+    """
+    r = check_range(radius, "radius", 0.0, float("inf"), inclusive=False)
+    # (M, k), a prefix of each row since distances ascend; columns >= N are padding
+    inside = (res.sq_dist <= r * r) & (torch.arange(res.idx.shape[1]) < num_source)
+    count = inside.sum(dim=1)  # (M,)
+    idx = torch.where(inside, res.idx, res.idx[:, :1])  # (M, k)
+    return BallQueryResult(idx, count)
 
 
 def knn(source: torch.Tensor, query: torch.Tensor, k: int) -> KNNResult:
@@ -102,21 +163,13 @@ def knn(source: torch.Tensor, query: torch.Tensor, k: int) -> KNNResult:
 
     Returns:
         :class:`KNNResult` with ``idx`` (M, k) long and ``sq_dist`` (M, k).
-        Among equidistant points the order is unspecified.
+        Among equidistant points the order is unspecified. To search the same
+        source several times, build a :class:`KNNIndex` once.
     """
     src = _as_f32_array(source, "source")
     qry = _as_f32_array(query, "query", allow_empty=True)
     k = check_count(k, "k", 1)
-    if len(qry) == 0:
-        return KNNResult(torch.zeros(0, k, dtype=torch.long), torch.zeros(0, k))
-    k_eff = min(k, len(src))
-    res = _knn_arrays(src, qry, k_eff)
-    if k_eff == k:
-        return res
-    pad = k - k_eff
-    idx = torch.cat([res.idx, res.idx[:, :1].expand(-1, pad)], dim=1)  # (M, k)
-    d = torch.cat([res.sq_dist, res.sq_dist[:, :1].expand(-1, pad)], dim=1)  # (M, k)
-    return KNNResult(idx, d)
+    return KNNIndex._from_array(src)._search(qry, k)
 
 
 def ball_query(source: torch.Tensor, query: torch.Tensor, radius: float, k: int) -> BallQueryResult:
@@ -133,9 +186,4 @@ def ball_query(source: torch.Tensor, query: torch.Tensor, radius: float, k: int)
         docstring for the padding.
     """
     r = check_range(radius, "radius", 0.0, float("inf"), inclusive=False)
-    res = knn(source, query, k)
-    # (M, k), a prefix of each row since distances ascend; columns >= N are padding
-    inside = (res.sq_dist <= r * r) & (torch.arange(res.idx.shape[1]) < source.shape[0])
-    count = inside.sum(dim=1)  # (M,)
-    idx = torch.where(inside, res.idx, res.idx[:, :1])  # (M, k)
-    return BallQueryResult(idx, count)
+    return ball_from_knn(knn(source, query, k), r, source.shape[0])

@@ -14,7 +14,7 @@ from stylize3d_core.models.scene_geometry import (
     prepare_geometry,
     radius_scale,
 )
-from stylize3d_core.points import idw_neighbours
+from stylize3d_core.points import ball_query, farthest_point_sample, idw_neighbours
 from stylize3d_core.points.reference import ball_query_reference, knn_reference
 
 
@@ -86,6 +86,29 @@ def test_prepare_geometry_is_ndc_subset_hierarchy_and_idw(cloud, cloud_size):
     # below max_points every point is encoded, whatever the seed
     small = prepare_geometry(pts.xyz, pts.rgb, fov, size, NeighbourhoodConfig(), seed=9)
     assert torch.equal(small.encoder_idx, torch.arange(n))
+
+
+@pytest.mark.parametrize("stages", [((4, 4), ((0.015, 0.025), (0.025, 0.05))), ((3, 2, 5), ((0.2, 0.1), (0.3, 0.35), (0.4, 0.5))),
+                                    ((), ())])
+def test_hierarchy_equals_one_search_per_ball(cloud, cloud_size, stages):
+    # build_hierarchy reuses each level's k-NN search for the next stage's down balls and runs the FPS in a
+    # thread; the textbook recipe makes one search per ball query: the same indices, ties and all (a
+    # pixel grid has many equidistant points)
+    (pts, fov), size = cloud, cloud_size
+    factors, radii = stages
+    cfg = NeighbourhoodConfig(k=10, stem_radius=0.1, stage_radii=radii, downsample=factors)
+    xyz = to_ndc(pts.xyz, ndc_params(pts.xyz[:, 2], fov, size[1] / size[0]))  # (N, 3) on the pixel grid
+    h = build_hierarchy(xyz, cfg, 1.5)
+    assert h.num_stages == len(factors)
+    assert torch.equal(h.stem_neighbours, ball_query(xyz, xyz, 0.1 * 1.5, 10).idx)
+    prev = xyz
+    for s, (factor, (r_down, r_same)) in enumerate(zip(factors, radii)):
+        idx = farthest_point_sample(prev, max(1, prev.shape[0] // factor))
+        cur = prev[idx]
+        assert torch.equal(h.sample_idx[s], idx) and torch.equal(h.xyz[s + 1], cur)
+        assert torch.equal(h.down_neighbours[s], ball_query(prev, cur, r_down * 1.5, 10).idx)
+        assert torch.equal(h.same_neighbours[s], ball_query(cur, cur, r_same * 1.5, 10).idx)
+        prev = cur
 
 
 def test_prepare_geometry_rejects_bad_input(cloud, cloud_size):

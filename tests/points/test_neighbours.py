@@ -2,7 +2,7 @@ import pytest
 import torch
 
 from stylize3d_core.errors import InputError
-from stylize3d_core.points import ball_query, knn
+from stylize3d_core.points import KNNIndex, ball_from_knn, ball_query, knn
 from stylize3d_core.points.reference import ball_query_reference, knn_reference, pairwise_sq_dist
 
 
@@ -56,6 +56,34 @@ def test_ball_query_exact_grid_ties_aside(surface_cloud):
         valid = fast.idx[i][mask[i]]
         assert len(torch.unique(valid)) == len(valid)
     assert bool((d_fast[mask] <= r * r + 1e-9).all())
+
+
+def test_index_reused_across_queries_and_radii(surface_cloud):
+    # one tree, many searches: each equals its own knn / ball_query call, and rows of a subset of the
+    # queries equal those rows of the whole search (grid ties included)
+    xyz = surface_cloud(30, 40)
+    index = KNNIndex(xyz)
+    assert index.num_points == len(xyz)
+    whole = index.knn(xyz, 12)
+    assert torch.equal(whole.idx, knn(xyz, xyz, 12).idx) and torch.equal(whole.sq_dist, knn(xyz, xyz, 12).sq_dist)
+    sub = torch.arange(5, len(xyz), 7)
+    part = index.knn(xyz[sub], 12)
+    assert torch.equal(part.idx, whole.idx[sub]) and torch.equal(part.sq_dist, whole.sq_dist[sub])
+    for r in (0.03, 0.07, 0.3):
+        want = ball_query(xyz, xyz[sub], r, 12)
+        for got in (index.ball_query(xyz[sub], r, 12), ball_from_knn(part, r, len(xyz))):
+            assert torch.equal(got.idx, want.idx) and torch.equal(got.count, want.count)
+    small = KNNIndex(xyz[:5])  # k above the source size pads with the nearest, as knn does
+    assert torch.equal(small.knn(xyz[:3], 8).idx, knn(xyz[:5], xyz[:3], 8).idx)
+    assert small.knn(torch.zeros(0, 3), 4).idx.shape == (0, 4)
+    with pytest.raises(InputError, match="source"):
+        KNNIndex(torch.tensor([[0.0, float("nan"), 0.0]]))
+    with pytest.raises(InputError, match="query"):
+        index.knn(torch.zeros(4, 2), 3)
+    with pytest.raises(InputError, match="k"):
+        index.knn(xyz[:2], 0)
+    with pytest.raises(InputError, match="radius"):
+        ball_from_knn(part, 0.0, len(xyz))
 
 
 def test_padding_repeats_the_nearest():
