@@ -20,6 +20,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import torch
+import torch.nn.functional as F
 
 from ..checks import check_finite, check_shape
 from ..errors import InputError
@@ -94,9 +95,12 @@ def three_nn(dense: torch.Tensor, sparse: torch.Tensor) -> IDWWeights:
 def interpolate(features: torch.Tensor, idx: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
     """Blend sparse ``features`` onto dense points: ``out[n] = sum_j weight[n, j] * features[idx[n, j]]``.
 
-    Differentiable with respect to ``features`` (and ``weight``). Memory stays at
-    a few (N, C) tensors: the neighbours are accumulated one column at a time
-    rather than gathered into an (N, K, C) tensor.
+    Differentiable with respect to ``features`` (and ``weight``). One fused
+    ``torch.nn.functional.embedding_bag`` (mode "sum" with per-sample weights): it
+    accumulates the k neighbours in column order into each output row, as a loop of
+    ``index_select`` + ``addcmul`` would (bit-identical on the 1 MP sample's 1.7M
+    points), 3-4x faster, with no (N, K, C) tensor. In bfloat16 it accumulates in
+    float32 and rounds once (the loop rounded after every neighbour).
 
     Args:
         features: (M, C) features of the sparse points.
@@ -116,8 +120,4 @@ def interpolate(features: torch.Tensor, idx: torch.Tensor, weight: torch.Tensor)
         raise InputError("idx", f"indices must lie in [0, {features.shape[0]}), got [{lo}, {hi}]")
     check_finite(weight, "weight")
     w = weight.to(features.dtype)  # (N, K)
-    out = features.index_select(0, idx[:, 0]) * w[:, 0:1]  # (N, C)
-    for j in range(1, idx.shape[1]):
-        # in place: ``out`` is a fresh tensor that no backward function saved
-        out.addcmul_(features.index_select(0, idx[:, j]), w[:, j : j + 1])  # (N, C)
-    return out
+    return F.embedding_bag(idx, features, mode="sum", per_sample_weights=w)  # (N, C)

@@ -134,3 +134,14 @@ def test_idw_neighbours_of_any_k_match_the_reference_knn(k):
     three = three_nn(dense, sparse)
     again = idw_neighbours(dense, sparse, 3)
     assert torch.equal(three.idx, again.idx) and torch.equal(three.weight, again.weight)
+
+
+def test_interpolate_equals_the_column_loop_bit_for_bit():
+    # the fused embedding_bag accumulates the neighbours in column order, as index_select + addcmul did
+    feats = torch.randn(300, 19, generator=torch.Generator().manual_seed(3))
+    nn3 = three_nn(rand((5000, 3), 4), rand((300, 3), 5))
+    loop = feats.index_select(0, nn3.idx[:, 0]) * nn3.weight[:, 0:1]
+    for j in (1, 2):
+        loop.addcmul_(feats.index_select(0, nn3.idx[:, j]), nn3.weight[:, j : j + 1])
+    assert torch.equal(interpolate(feats, nn3.idx, nn3.weight), loop)
+    assert interpolate(feats, nn3.idx[:0], nn3.weight[:0]).shape == (0, 19)
