@@ -48,12 +48,12 @@ def idw_weights(dist: torch.Tensor, eps: float = IDW_EPS) -> torch.Tensor:
     if dist.numel() and float(dist.min()) < 0:
         raise InputError("dist", f"distances must be >= 0, got {float(dist.min())}")
     d = dist.double()  # (N, K)
-    w = 1.0 / (d + eps)  # (N, K), finite: d >= 0
-    w = w / w.sum(dim=1, keepdim=True)
-    coincide = d[:, :1] < eps  # (N, 1)
-    one_hot = torch.zeros_like(w)
-    one_hot[:, 0] = 1.0
-    return torch.where(coincide, one_hot, w).to(dist.dtype)
+    coincide = d[:, 0] < eps  # (N,)
+    w = (d + eps).reciprocal_()  # (N, K), finite: d >= 0; in place: fewer (N, K) float64 buffers
+    w /= w.sum(dim=1, keepdim=True)
+    if bool(coincide.any()):
+        w[coincide] = torch.nn.functional.one_hot(torch.zeros((), dtype=torch.long), w.shape[1]).to(w.dtype)
+    return w.to(dist.dtype)
 
 
 def idw_neighbours(dense: torch.Tensor, sparse: torch.Tensor, k: int = 3) -> IDWWeights:
