@@ -7,6 +7,12 @@ temporary file is removed on the way out (:mod:`stylize3d_core.io.atomic`), and
 the command ends with one line on stderr and the status ``128 + signal``
 (130 for SIGINT, 143 for SIGTERM), never a traceback. A second signal while the
 first one is being handled is ignored, so the clean-up cannot be cut short.
+
+Python drops an exception raised by a signal handler in a few places (a
+callback of the import machinery, a finaliser: it prints "Exception ignored"
+and carries on). So the handlers also register a commit check with
+:mod:`stylize3d_core.io.atomic`: once a signal was received, no temporary
+output is renamed over the user's file, whatever swallowed the exception.
 """
 
 from __future__ import annotations
@@ -38,11 +44,21 @@ def _on_signal(signum: int, _frame) -> None:
     raise Interrupted(signum)
 
 
+def raise_if_interrupted() -> None:
+    """Raise :class:`Interrupted` if a signal was received (its exception may have been dropped)."""
+    if _received:
+        raise Interrupted(_received[0])
+
+
 def install_signal_handlers() -> None:
-    """Turn SIGINT and SIGTERM into :class:`Interrupted` (main thread only)."""
+    """Turn SIGINT and SIGTERM into :class:`Interrupted` (main thread only), and stop every atomic
+    write from committing once one was received (see the module docstring)."""
     _received.clear()
     for sig in HANDLED:
         signal.signal(sig, _on_signal)
+    from stylize3d_core.io.atomic import add_commit_check  # light: no torch
+
+    add_commit_check(raise_if_interrupted)
 
 
 def interrupted_status(e: BaseException) -> int:
@@ -66,9 +82,9 @@ def run(argv: Optional[List[str]] = None) -> int:
 
     Warnings raised while the libraries import are shown as one line too.
     """
-    install_signal_handlers()
     warnings.showwarning = show_warning
     try:
+        install_signal_handlers()  # in the try: a signal may land while it imports the commit check
         from app.cli import main  # lazy: imports torch
 
         return main(argv)

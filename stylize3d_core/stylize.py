@@ -182,6 +182,10 @@ class Stylized3DPhoto:
         self._strata = StratifiedOrder(self._geom.xyz.shape[0], settings.seed)
         self._order = self._strata.order  # (N,)
         self._xyz = self._geom.xyz.index_select(0, self._order).contiguous()  # (N, 3), in self._order
+        up = self._geom.upsample  # the upsampling and the colours in self._order: dense features come out ordered
+        self._in_order = self._geom._replace(
+            rgb=self._geom.rgb.index_select(0, self._order),
+            upsample=up._replace(idx=up.idx.index_select(0, self._order), weight=up.weight.index_select(0, self._order)))
         self._stylized: Optional[torch.Tensor] = None  # (M, C) at strength 1
         self._stylized2: Optional[torch.Tensor] = None  # (M, C) of the second style, at strength 1
         self._style_stats: Optional[LabStats] = None  # colour statistics of the style (detail_transfer)
@@ -270,14 +274,14 @@ class Stylized3DPhoto:
                 sparse = blend(self._content, stylized, self._strength)
                 if self.model.config.detail_transfer and stats is not None:
                     if self._transfer is None:
-                        self._transfer = ColourTransfer(self._geom.rgb)
+                        self._transfer = ColourTransfer(self._in_order.rgb)
                     colours = self._transfer(stats, self._strength)
-            dense = self.model.dense_features(sparse, self._geom, colours)  # (N, Cr)
+            dense = self.model.dense_features(sparse, self._in_order, colours)  # (N, Cr), in self._order
             if not torch.isfinite(dense.sum()) and not torch.isfinite(dense).all():
                 raise InputError(self._checkpoint_name, "its weights make NaN or infinite features on this photo "
                                  "(the weights are finite but far too large: a diverged or corrupt checkpoint)")
             # float32 whatever the autocast dtype (bfloat16 under torch.autocast): the rasterizer takes float32
-            self._dense = dense.float().index_select(0, self._order).contiguous()
+            self._dense = dense.float().contiguous()
         self.timings["upsample"] = time.perf_counter() - t0
 
     def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False,

@@ -10,6 +10,14 @@ chunks, ``.json`` must parse). On any exception -- including
 ``KeyboardInterrupt`` and a cancellation raised by a progress callback -- the
 temporary file is removed and the destination is left as it was.
 
+**Commit checks** (:func:`add_commit_check`): functions called just before
+every rename; one that raises stops the commit the same way. The command line
+registers one that raises when a signal was received: Python drops an
+exception raised by a signal handler in some places (a callback run by the
+import machinery or a finaliser prints it as "Exception ignored" and goes on),
+and without the check such an export would run to its end and replace the
+user's file after the user pressed Ctrl-C.
+
 :func:`write_atomically` wraps the common case: write, verify, rename, and turn
 any write error (disk full, file too large, I/O error, broken pipe, permission
 denied) into an :class:`~stylize3d_core.errors.ExportError` that names the
@@ -25,7 +33,7 @@ import os
 import shutil
 import tempfile
 from pathlib import Path
-from typing import Callable, Iterator, Optional, Union
+from typing import Callable, Iterator, List, Optional, Union
 
 from ..errors import ExportError
 
@@ -47,6 +55,27 @@ _REASONS = {
     errno.EPERM: "permission denied",
     errno.EROFS: "the file system is read-only",
 }
+
+
+_commit_checks: List[Callable[[], None]] = []
+
+
+def add_commit_check(check: Callable[[], None]) -> None:
+    """Call ``check()`` before every rename of :func:`atomic_path`; if it raises, nothing is renamed
+    (the temporary output is removed) and the exception propagates. Added once per function."""
+    if check not in _commit_checks:
+        _commit_checks.append(check)
+
+
+def remove_commit_check(check: Callable[[], None]) -> None:
+    """Undo :func:`add_commit_check` (no error if ``check`` was not added)."""
+    if check in _commit_checks:
+        _commit_checks.remove(check)
+
+
+def _run_commit_checks() -> None:
+    for check in tuple(_commit_checks):
+        check()
 
 
 def describe_os_error(e: BaseException) -> str:
@@ -146,6 +175,7 @@ def atomic_path(
         if directory:
             if verify is not None:
                 verify(tmp)
+            _run_commit_checks()
             _rename(lambda: _replace_folder(tmp, dest, parent), dest)
         else:
             if tmp.stat().st_size == 0:
@@ -155,6 +185,7 @@ def atomic_path(
                 verify(tmp)
             else:
                 verify_by_suffix(tmp, dest)
+            _run_commit_checks()
             # mkstemp (and some writers, e.g. safetensors) create 0600 files: give it a normal file's mode.
             _rename(lambda: (os.chmod(tmp, 0o666 & ~_umask()), os.replace(tmp, dest)), dest)
     except BaseException:

@@ -3,11 +3,12 @@
 A checkpoint is one ``.safetensors`` file. Its metadata holds::
 
     format   "stylize3d-model"
-    version  "4"
+    version  "5"
     config   the ModelConfig as JSON (so the file alone rebuilds the model)
     stage    "1" (view synthesis) or "2" (stylization)
     info     free JSON: iterations, data, command, hours...
 
+Version "4" files have no texture residual (``decoder.texture_channels`` 0; added in version 5).
 Version "3" files have no colour transform (``decoder.transform_channels`` 0)
 nor colour transfer (``detail_transfer`` False), both added in version 4, version "2" files no detail path either
 (``detail_channels`` 0; added in version 3). Version "1" files are still read too: their
@@ -40,8 +41,8 @@ from .scene_geometry import NeighbourhoodConfig
 from .stylize3d import ModelConfig, Stylize3DModel
 
 FORMAT = "stylize3d-model"
-VERSION = "4"
-READABLE_VERSIONS = ("1", "2", "3", "4")
+VERSION = "5"
+READABLE_VERSIONS = ("1", "2", "3", "4", "5")
 _V1_NEIGHBOURHOOD = ("k", "stem_radius", "stage_radii", "downsample", "fps_start")
 PathLike = Union[str, "os.PathLike[str]"]
 

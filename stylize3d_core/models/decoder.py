@@ -18,7 +18,7 @@ A 1x1 convolution of the coarsest level ``x_levels`` predicts, per pixel, a
 3 x 3 matrix ``A`` and an offset ``b``, upsampled bilinearly to full resolution
 (a smooth field), and wherever points cover the pixel (coverage ``m``)::
 
-    out = clamp(rgb + m * (A (d - rgb) + b), 0, 1)
+    out = clamp(rgb + m * (A (d - rgb) + b + r), 0, 1)
 
 so ``A = I, b = 0`` renders the points' colours exactly (sharp, and consistent
 from view to view by construction), ``A = 0, b = 0`` is the plain U-Net output,
@@ -27,6 +27,16 @@ locally varying colour transform while it paints texture into ``rgb``. Holes
 (``m = 0``) keep the U-Net's inpainting. A new decoder starts at the identity;
 :func:`~stylize3d_core.models.stylize3d.add_colour_transform` can also add a zero
 head to a trained model, leaving its output unchanged.
+
+**Texture residual** (``texture_channels`` = 3, with the colour transform): the
+U-Net's last 1x1 convolution has three more outputs, ``r = TEXTURE_SCALE *
+tanh(.)``, added where points cover the pixel (``r`` above; without the head
+``r = 0``). The colour transform alone is smooth (it comes from the coarsest
+level), so a transform near the identity leaves the U-Net no way to paint
+brush strokes onto covered pixels; ``r`` is that way: full-resolution texture
+on top of the recoloured detail. Its weights start at zero (the output is the
+same as without it); :func:`~stylize3d_core.models.stylize3d.add_texture_residual`
+adds it to a trained model.
 
 The full-resolution layers are narrow (``width / 4`` channels for 2 levels);
 the ``width``-channel layers run at 1/2 and 1/4 resolution.
@@ -95,6 +105,8 @@ class DecoderConfig:
             the learning rate per weight whatever the gradient, a gain of 1 / width keeps each step's
             change of the colour matrix near the learning rate instead of ``width`` times it (the
             presets use 1 / width; 1.0 is the layout of the first checkpoints with the transform).
+        texture_channels: 0, or 3: the texture residual ``r`` added on covered pixels (see the module
+            docstring); needs the colour transform. Default 0.
     """
 
     in_channels: int = 256
@@ -105,8 +117,14 @@ class DecoderConfig:
     channels_last: bool = True
     transform_channels: int = 0
     transform_gain: float = 1.0
+    texture_channels: int = 0
 
     def __post_init__(self) -> None:
+        if self.texture_channels not in (0, 3):
+            raise InputError("DecoderConfig.texture_channels", f"must be 0 or 3, got {self.texture_channels!r}")
+        if self.texture_channels and not self.transform_channels:
+            raise InputError("DecoderConfig.texture_channels", "the texture residual is added with the colour "
+                                                               "transform: needs transform_channels 3")
         if not 0.0 < self.transform_gain <= 1.0:
             raise InputError("DecoderConfig.transform_gain", f"must be in (0, 1], got {self.transform_gain!r}")
         if self.transform_channels not in (0, 3):
@@ -126,13 +144,15 @@ class DecoderConfig:
             raise InputError("DecoderConfig.negative_slope", f"must be in [0, 1), got {self.negative_slope}")
 
     @classmethod
-    def paper(cls, in_channels: int = 256, supersample: bool = False, transform_channels: int = 0) -> "DecoderConfig":
+    def paper(cls, in_channels: int = 256, supersample: bool = False, transform_channels: int = 0,
+              texture_channels: int = 0) -> "DecoderConfig":
         """The public code's decoder: width 256, 2 levels (seconds per 512^2 frame on a CPU)."""
         return cls(in_channels=in_channels, width=256, levels=2, supersample=supersample,
-                   transform_channels=transform_channels, transform_gain=1.0 / 256)
+                   transform_channels=transform_channels, transform_gain=1.0 / 256, texture_channels=texture_channels)
 
     @classmethod
-    def lite(cls, in_channels: int = 64, supersample: bool = False, transform_channels: int = 0) -> "DecoderConfig":
+    def lite(cls, in_channels: int = 64, supersample: bool = False, transform_channels: int = 0,
+             texture_channels: int = 0) -> "DecoderConfig":
         """CPU decoder for the viewer: width 96 (24 channels at full resolution), 2 levels.
 
         Chosen with ``benchmarks/bench_decoder.py`` (C_in = 64, widths 64/96/128/192,
@@ -142,7 +162,7 @@ class DecoderConfig:
         width 128 ~340 ms at 512^2 at best (no headroom).
         """
         return cls(in_channels=in_channels, width=96, levels=2, supersample=supersample,
-                   transform_channels=transform_channels, transform_gain=1.0 / 96)
+                   transform_channels=transform_channels, transform_gain=1.0 / 96, texture_channels=texture_channels)
 
 
 def pad_to_multiple(x: torch.Tensor, multiple: int) -> torch.Tensor:
@@ -163,6 +183,9 @@ def supersample_pool(features: torch.Tensor, mask: torch.Tensor) -> Tuple[torch.
     summed = F.avg_pool2d(features * mask, 2)  # (B, C, H, W); exactly 0 where coverage is 0
     return summed / coverage.clamp_min(1e-6), coverage
 
+
+TEXTURE_SCALE = 0.5
+"""The texture residual's range: ``r`` in (-TEXTURE_SCALE, TEXTURE_SCALE) per channel."""
 
 IDENTITY_TRANSFORM = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
 """The colour transform's coefficients (A row by row, then b) that render the colours unchanged."""
@@ -283,19 +306,30 @@ def _assemble(features: torch.Tensor, mask: torch.Tensor, multiple: int, channel
     return x
 
 
+def zero_texture(out_rgb: nn.Conv2d) -> None:
+    """Zero the texture residual's rows of the U-Net's last convolution (outputs 3 onwards): ``r = 0``."""
+    with torch.no_grad():
+        out_rgb.weight[3:].zero_()
+        out_rgb.bias[3:].zero_()
+
+
 def apply_colour_transform(rgb: torch.Tensor, colours: torch.Tensor, coverage: torch.Tensor,
-                           coefficients: torch.Tensor, padded: Tuple[int, int]) -> torch.Tensor:
-    """``clamp(rgb + m (A (d - rgb) + b), 0, 1)`` (see the module docstring).
+                           coefficients: torch.Tensor, padded: Tuple[int, int],
+                           texture: Optional[torch.Tensor] = None) -> torch.Tensor:
+    """``clamp(rgb + m (A (d - rgb) + b + r), 0, 1)`` (see the module docstring).
 
     rgb, colours ``d``: (B, 3, H, W); coverage ``m``: (B, 1, H, W); coefficients:
     (B, 12, h', w') over the zero-padded frame of size ``padded`` (rows of ``A``
-    first, then ``b``): upsampled bilinearly to ``padded``, then cropped to (H, W).
+    first, then ``b``): upsampled bilinearly to ``padded``, then cropped to (H, W);
+    ``texture`` ``r``: (B, 3, H, W) or None (0).
     """
     b, _, h, w = rgb.shape
     full = F.interpolate(coefficients, size=padded, mode="bilinear", align_corners=False)[..., :h, :w]
     a = full[:, :9].reshape(b, 3, 3, h, w)
     delta = colours.to(rgb.dtype) - rgb  # (B, 3, H, W)
     mixed = torch.einsum("bijhw,bjhw->bihw", a, delta) + full[:, 9:]
+    if texture is not None:
+        mixed = mixed + texture.to(rgb.dtype)
     return (rgb + coverage * mixed).clamp(0.0, 1.0)
 
 
@@ -346,7 +380,9 @@ class UNetDecoder(nn.Module):
         self.downs = nn.ModuleList([_Down(in_ch[i], w, config.negative_slope) for i in range(n)])
         self.ups = nn.ModuleList([_Up(2 * skip_ch[i], skip_ch[i]) for i in range(n)])
         self.out_conv = nn.Conv2d(skip_ch[0], skip_ch[0], 3, padding=1)
-        self.out_rgb = nn.Conv2d(skip_ch[0], 3, 1)
+        self.out_rgb = nn.Conv2d(skip_ch[0], 3 + config.texture_channels, 1)  # RGB, then the texture residual
+        if config.texture_channels:
+            zero_texture(self.out_rgb)
         self.transform = None
         if config.transform_channels:
             self.transform = nn.Conv2d(w, 12, 1)  # 3 x 3 matrix + offset per pixel, at 1 / 2**levels resolution
@@ -383,11 +419,13 @@ class UNetDecoder(nn.Module):
         for i in reversed(range(self.config.levels)):
             x = self.ups[i](x, skips[i], should_stop)
         x = _layer(self.out_conv, x, should_stop, F.relu)
-        rgb = torch.sigmoid(_layer(self.out_rgb, x, should_stop))[..., :h, :w]  # (B, 3, H, W)
+        y = _layer(self.out_rgb, x, should_stop)[..., :h, :w]  # (B, 3 + texture_channels, H, W)
+        rgb = torch.sigmoid(y[:, :3])  # (B, 3, H, W)
+        texture = TEXTURE_SCALE * torch.tanh(y[:, 3:]) if self.config.texture_channels else None
         if self.transform is not None:
             padded = (coarse.shape[-2] * 2**self.config.levels, coarse.shape[-1] * 2**self.config.levels)
             gain = self.config.transform_gain
             coefficients = _layer(self.transform, coarse * gain if gain != 1.0 else coarse, should_stop)
             _stop(should_stop)
-            rgb = apply_colour_transform(rgb, colours, mask, coefficients, padded)
+            rgb = apply_colour_transform(rgb, colours, mask, coefficients, padded, texture)
         return rgb.contiguous()

@@ -59,7 +59,7 @@ from ..points import interpolate
 from ..render.rasterize import Fragments, RasterSettings
 from ..render.rasterizer import PointRasterizer
 from .adaattn import AdaAttNConfig, AdaAttNStylizer, blend
-from .decoder import DecoderConfig, UNetDecoder, identity_transform
+from .decoder import DecoderConfig, UNetDecoder, identity_transform, zero_texture
 from .encoder import Encoder, EncoderConfig
 from .scene_geometry import NeighbourhoodConfig, SceneGeometry, prepare_geometry
 
@@ -95,7 +95,8 @@ class ModelConfig:
         content_channels=128, hidden=128, value_channels=128, qk_channels=64))
     raster_channels: int = 32
     decoder: DecoderConfig = field(default_factory=lambda: DecoderConfig.lite(in_channels=32 + 3,
-                                                                              transform_channels=3))
+                                                                              transform_channels=3,
+                                                                              texture_channels=3))
     detail_channels: int = 3
     detail_transfer: bool = True
 
@@ -127,16 +128,17 @@ class ModelConfig:
     @classmethod
     def lite(cls) -> "ModelConfig":
         """CPU configuration: encoder 32/64/128, AdaAttN 128 (q/k 64), 32 raster channels + the RGB detail
-        path and its colour transform, decoder width 96."""
+        path with its colour transform and texture residual, decoder width 96."""
         return cls()
 
     @classmethod
     def paper(cls) -> "ModelConfig":
         """The public code's widths: encoder 64/128/256, AdaAttN 256, 256 raster channels + the RGB
-        detail path and its colour transform, decoder 256."""
+        detail path with its colour transform and texture residual, decoder 256."""
         return cls(
             name="paper", encoder=EncoderConfig.paper(), stylizer=AdaAttNConfig.paper(),
-            raster_channels=256, decoder=DecoderConfig.paper(in_channels=256 + 3, transform_channels=3),
+            raster_channels=256, decoder=DecoderConfig.paper(in_channels=256 + 3, transform_channels=3,
+                                                             texture_channels=3),
             detail_channels=3,
         )
 
@@ -265,11 +267,30 @@ def add_colour_transform(model: Stylize3DModel, identity: bool = False,
     return wide
 
 
+def add_texture_residual(model: Stylize3DModel) -> Stylize3DModel:
+    """A copy of a model with the colour transform but no texture residual, with the residual added:
+    its rows of the U-Net's last convolution start at zero, so the output is unchanged."""
+    cfg = model.config
+    if not cfg.decoder.transform_channels:
+        raise InputError("model", "has no colour transform to add the texture residual to: add_colour_transform first")
+    if cfg.decoder.texture_channels:
+        raise InputError("model", "already has the texture residual")
+    wide = Stylize3DModel(replace(cfg, decoder=replace(cfg.decoder, texture_channels=3)))
+    state = dict(model.state_dict())
+    for key in ("decoder.out_rgb.weight", "decoder.out_rgb.bias"):
+        w = state[key]  # (3, ...)
+        state[key] = torch.cat([w, w.new_zeros((3,) + tuple(w.shape[1:]))], dim=0)
+    wide.load_state_dict(state)
+    zero_texture(wide.decoder.out_rgb)
+    wide.train(model.training)
+    return wide
+
+
 def count_parameters(module: nn.Module) -> int:
     """Number of trainable parameters."""
     return sum(p.numel() for p in module.parameters() if p.requires_grad)
 
 
 __all__ = [
-    "DETAIL_CHANNELS", "add_colour_transform", "add_detail_path", "ModelConfig", "NeighbourhoodConfig", "SceneGeometry", "prepare_geometry", "Stylize3DModel", "count_parameters",
+    "DETAIL_CHANNELS", "add_colour_transform", "add_detail_path", "add_texture_residual", "ModelConfig", "NeighbourhoodConfig", "SceneGeometry", "prepare_geometry", "Stylize3DModel", "count_parameters",
 ]

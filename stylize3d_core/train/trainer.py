@@ -51,7 +51,8 @@ from ..models.colour_transfer import lab_stats, transfer_colours
 from ..models.efficientnet_lite import EfficientNetLiteFeatures
 from ..models.losses import PerceptualLoss, PerceptualLossConfig, StylizationLoss, colour_statistics_loss
 from ..models.style_features import StyleEncoder
-from ..models.stylize3d import ConfigName, ModelConfig, Stylize3DModel, add_colour_transform, add_detail_path
+from ..models.stylize3d import (ConfigName, ModelConfig, Stylize3DModel, add_colour_transform, add_detail_path,
+                                add_texture_residual)
 from ..render.reproject import pairwise_consistency, sample_view
 from .cache import TrainDataset
 from .data import TrainSample
@@ -308,6 +309,10 @@ def train(config: TrainConfig, log: Log = print) -> Path:
         model = add_colour_transform(model, identity=True, transfer=target.detail_transfer)
         log("added the colour transform to the initial model (identity: it renders the points' colours"
             + (", moved to the style's colour statistics)" if target.detail_transfer else ")"))
+    if (state is None and model.config.decoder.transform_channels and not model.config.decoder.texture_channels
+            and ModelConfig.by_name(config.model).decoder.texture_channels):
+        model = add_texture_residual(model)
+        log("added the texture residual to the initial model (zero weights: same output)")
     if state is None and config.init_stylizer is not None:
         donor = load_checkpoint(config.init_stylizer).model
         if donor.config.stylizer != model.config.stylizer or donor.config.encoder != model.config.encoder:

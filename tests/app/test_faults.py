@@ -169,11 +169,15 @@ def test_signal_during_export_keeps_the_old_output(kind, sig, noise_photo, tmp_p
 @pytest.fixture
 def entry_handlers():
     """app.entry's signal handlers in this (the main) thread, restored afterwards."""
+    from stylize3d_core.io.atomic import remove_commit_check
+
     saved = {s: signal.getsignal(s) for s in entry.HANDLED}
     entry.install_signal_handlers()
     yield
     for s, h in saved.items():
         signal.signal(s, h)
+    entry._received.clear()
+    remove_commit_check(entry.raise_if_interrupted)
 
 
 @pytest.mark.parametrize("flag, name", [("--save-ply", "c.ply"), ("--save-camera-path", "c.json"),
@@ -199,6 +203,32 @@ def test_signal_between_write_and_rename(flag, name, sig, noise_photo, tmp_path,
     assert main(argv) == 128 + sig
     assert dest.read_bytes() == b"old"
     assert sorted(os.listdir(tmp_path)) == [name]
+    assert capsys.readouterr().err.strip().endswith("nothing was written")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_a_signal_whose_exception_was_dropped_still_stops_the_commit(sig, noise_photo, tmp_path, monkeypatch,
+                                                                     capsys, entry_handlers):
+    """Python drops a signal handler's exception in some callbacks ("Exception ignored"): the export
+    then runs on, but the received signal still keeps its output from replacing the old file."""
+    import stylize3d_core.io.atomic as atomic
+
+    dest = tmp_path / "v.mp4"
+    dest.write_bytes(b"old")
+    real_fsync = atomic._fsync
+
+    def fsync_and_a_dropped_signal(path):
+        real_fsync(path)
+        try:
+            os.kill(os.getpid(), sig)  # the handler records the signal and raises ...
+        except KeyboardInterrupt:
+            pass  # ... and the exception is lost, as in an import-lock callback
+
+    monkeypatch.setattr(atomic, "_fsync", fsync_and_a_dropped_signal)
+    argv = ["render", str(noise_photo), "--frames", "2", "--size", "32", "-q", "-o", str(dest)]
+    assert main(argv) == 128 + sig
+    assert dest.read_bytes() == b"old"
+    assert sorted(os.listdir(tmp_path)) == ["v.mp4"]
     assert capsys.readouterr().err.strip().endswith("nothing was written")
 
 

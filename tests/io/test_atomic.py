@@ -3,7 +3,7 @@ import os
 import pytest
 
 from stylize3d_core.errors import ExportError
-from stylize3d_core.io.atomic import atomic_path
+from stylize3d_core.io.atomic import add_commit_check, atomic_path, remove_commit_check
 
 
 def test_success_replaces_destination(tmp_path):
@@ -92,3 +92,43 @@ def test_mode_is_normal_even_if_the_writer_recreates_the_file(tmp_path):
     finally:
         os.umask(mask)
     assert dest.stat().st_mode & 0o777 == 0o644
+
+
+@pytest.mark.parametrize("directory", [False, True])
+def test_a_failing_commit_check_keeps_the_old_output(tmp_path, directory):
+    dest = tmp_path / ("out" if directory else "a.txt")
+    if directory:
+        dest.mkdir()
+        (dest / "old.txt").write_text("old")
+    else:
+        dest.write_text("old")
+
+    class Stop(Exception):
+        pass
+
+    calls = []
+
+    def check():
+        calls.append(1)
+        raise Stop
+
+    add_commit_check(check)
+    add_commit_check(check)  # once per function
+    try:
+        with pytest.raises(Stop):
+            with atomic_path(dest, directory=directory) as tmp:
+                if directory:
+                    (tmp / "new.txt").write_text("new")
+                else:
+                    tmp.write_text("new")
+    finally:
+        remove_commit_check(check)
+    assert calls == [1]
+    assert (dest / "old.txt").read_text() == "old" if directory else dest.read_text() == "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [dest.name]
+    with atomic_path(dest) if not directory else atomic_path(dest, directory=True) as tmp:  # removed: commits
+        if directory:
+            (tmp / "new.txt").write_text("new")
+        else:
+            tmp.write_text("new")
+    assert (dest / "new.txt").exists() if directory else dest.read_text() == "new"

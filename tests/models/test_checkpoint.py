@@ -122,8 +122,8 @@ def test_version_1_layout_is_mapped_to_the_neighbourhood_config(tmp_path):
     _with_metadata(good, bad, version="1")
     with pytest.raises(InputError, match="mixed.safetensors.*configuration is unreadable"):
         load_checkpoint(bad)
-    _with_metadata(good, bad, version="5")
-    with pytest.raises(InputError, match="version .5. is not supported"):
+    _with_metadata(good, bad, version="6")
+    with pytest.raises(InputError, match="version .6. is not supported"):
         load_checkpoint(bad)
 
 
@@ -134,8 +134,8 @@ def test_shipped_checkpoint_is_the_current_lite_layout():
 
     with safe_open(str(DEFAULT_MODEL), framework="pt") as f:
         meta = f.metadata()
-    assert meta["version"] == "4"
+    assert meta["version"] == "5"
     ck = load_checkpoint(DEFAULT_MODEL)
-    assert ck.model.config == ModelConfig.lite()  # detail path, colour transform, colour transfer
+    assert ck.model.config == ModelConfig.lite()  # detail path, colour transform, texture residual, colour transfer
     assert ck.model.config.neighbourhood == NeighbourhoodConfig()
     assert ck.info["hours_total"] > 0 and "provenance" in ck.info

@@ -110,3 +110,22 @@ def test_gamut_map_keeps_lightness_and_hue_and_fits_srgb():
     # a white rim asked to take a saturated hue stays (nearly) white, not cyan
     white = gamut_map(np.array([[99.0, -40.0, -40.0]], np.float32))
     assert np.hypot(white[0, 1], white[0, 2]) < 10.0
+
+
+def test_linear_rgb_inverts_opencv_lab_inside_the_gamut():
+    from stylize3d_core.models.colour_transfer import _linear_rgb
+
+    rgb = np.random.default_rng(5).random((5000, 3), dtype=np.float32)
+    lab = cv2.cvtColor(rgb.reshape(-1, 1, 3), cv2.COLOR_RGB2Lab).reshape(-1, 3)
+    srgb_to_linear = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
+    np.testing.assert_allclose(_linear_rgb(lab), srgb_to_linear, atol=6e-3)  # OpenCV rounds its constants
+
+
+def test_transfer_does_not_depend_on_the_order_of_the_points():
+    rng = np.random.default_rng(6)
+    rgb = torch.from_numpy(rng.random((20000, 3), dtype=np.float32))
+    style = LabStats(np.array([40.0, 30.0, -20.0], np.float32), np.array([25.0, 30.0, 30.0], np.float32))
+    perm = torch.from_numpy(rng.permutation(20000))
+    a = ColourTransfer(rgb)(style, 0.7)
+    b = ColourTransfer(rgb[perm])(style, 0.7)
+    assert torch.equal(a[perm], b)

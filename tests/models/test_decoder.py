@@ -10,6 +10,7 @@ from stylize3d_core.models.decoder import (
     DecoderConfig,
     UNetDecoder,
     IDENTITY_TRANSFORM,
+    TEXTURE_SCALE,
     apply_colour_transform,
     identity_transform,
     pad_to_multiple,
@@ -197,3 +198,50 @@ def test_colour_transform_config_checks():
     assert DecoderConfig.lite(in_channels=35, transform_channels=3).transform_gain == pytest.approx(1 / 96)
     with pytest.raises(InputError, match="transform_gain"):
         DecoderConfig(in_channels=8, transform_channels=3, transform_gain=0.0)
+
+
+def test_texture_residual_known_values():
+    """The residual r is added where points cover the pixel, scaled by the coverage, before the clamp."""
+    g = torch.Generator().manual_seed(4)
+    rgb, d = torch.rand(1, 3, 4, 6, generator=g), torch.rand(1, 3, 4, 6, generator=g)
+    m = torch.rand(1, 1, 4, 6, generator=g)
+    r = (torch.rand(1, 3, 4, 6, generator=g) - 0.5) * 0.4
+    coeff = torch.tensor(IDENTITY_TRANSFORM).reshape(1, 12, 1, 1)
+    out = apply_colour_transform(rgb, d, m, coeff, (4, 8), texture=r)
+    torch.testing.assert_close(out, (rgb + m * (d - rgb + r)).clamp(0, 1), rtol=0, atol=1e-6)
+    assert torch.equal(apply_colour_transform(rgb, d, m, coeff, (4, 8), texture=torch.zeros_like(r)),
+                       apply_colour_transform(rgb, d, m, coeff, (4, 8)))
+
+
+def test_texture_residual_starts_at_zero_and_gets_gradients_where_the_identity_hides_the_unet():
+    """A new head changes nothing; with the identity transform the U-Net's RGB gets no gradient on
+    fully covered pixels, the residual does (the way texture reaches covered pixels)."""
+    torch.manual_seed(2)
+    cfg = DecoderConfig(in_channels=8 + 3, width=16, transform_channels=3, texture_channels=3,
+                        transform_gain=1.0 / 16)
+    dec = UNetDecoder(cfg)
+    assert dec.out_rgb.out_channels == 6 and not dec.out_rgb.weight[3:].any() and not dec.out_rgb.bias[3:].any()
+    plain = UNetDecoder(DecoderConfig(in_channels=8 + 3, width=16, transform_channels=3, transform_gain=1.0 / 16))
+    state = {k: (v[:3] if k.startswith("out_rgb.") else v) for k, v in dec.state_dict().items()}
+    plain.load_state_dict(state)
+    feats = torch.rand(1, 11, 12, 16)
+    mask = torch.ones(1, 1, 12, 16)
+    with torch.no_grad():
+        torch.testing.assert_close(dec.eval()(feats, mask), plain.eval()(feats, mask), rtol=0, atol=0)
+    dec.train()
+    target = torch.rand(1, 3, 12, 16)
+    ((dec(feats, mask) - target) ** 2).mean().backward()
+    assert dec.out_rgb.weight.grad[:3].abs().max() == 0  # rgb is replaced by the colours everywhere
+    assert dec.out_rgb.weight.grad[3:].abs().max() > 0
+    with torch.no_grad():  # a large residual is bounded by TEXTURE_SCALE before the clamp
+        dec.out_rgb.bias[3:].fill_(50.0)
+        out = dec.eval()(feats * 0.5, mask)
+    torch.testing.assert_close(out, (feats[:, -3:] * 0.5 + TEXTURE_SCALE).clamp(0, 1), rtol=0, atol=1e-5)
+
+
+def test_texture_residual_config_checks():
+    with pytest.raises(InputError, match="texture_channels"):
+        DecoderConfig(in_channels=11, width=16, texture_channels=3)  # needs the colour transform
+    with pytest.raises(InputError, match="texture_channels"):
+        DecoderConfig(in_channels=11, width=16, transform_channels=3, texture_channels=1)
+    assert DecoderConfig.lite(in_channels=35, transform_channels=3, texture_channels=3).texture_channels == 3

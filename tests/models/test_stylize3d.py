@@ -12,6 +12,7 @@ from stylize3d_core.models.stylize3d import (
     Stylize3DModel,
     add_colour_transform,
     add_detail_path,
+    add_texture_residual,
     count_parameters,
 )
 
@@ -165,3 +166,23 @@ def test_config_checks():
     with pytest.raises(InputError):
         ModelConfig.by_name("huge")
     assert ModelConfig.paper().raster_channels == 256
+
+
+def test_add_texture_residual_keeps_the_output(cloud):
+    pts, fov = cloud
+    geom = prepare_geometry(pts.xyz, pts.rgb, fov, (40, 48), TINY.neighbourhood)
+    torch.manual_seed(0)
+    head = add_colour_transform(add_detail_path(Stylize3DModel(TINY)), identity=True).eval()
+    with pytest.raises(InputError, match="colour transform"):
+        add_texture_residual(add_detail_path(Stylize3DModel(TINY)))
+    with torch.no_grad():  # a colour transform away from the identity, so rgb and colours both count
+        head.decoder.transform.bias.mul_(0.6)
+    tex = add_texture_residual(head)
+    assert tex.config.decoder.texture_channels == 3 and not tex.training
+    with pytest.raises(InputError, match="already"):
+        add_texture_residual(tex)
+    cam = Cameras.identity(fov)
+    with torch.no_grad():
+        before = head.render_view(head.dense_features(head.encode(geom), geom), geom.xyz, cam, 24, 32)[0]
+        after = tex.render_view(tex.dense_features(tex.encode(geom), geom), geom.xyz, cam, 24, 32)[0]
+    torch.testing.assert_close(after, before, rtol=0, atol=1e-6)
