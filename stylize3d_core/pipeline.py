@@ -7,6 +7,7 @@ setting is a documented dataclass field.
 from __future__ import annotations
 
 import time
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Dict, NamedTuple, Optional, Tuple
@@ -257,6 +258,36 @@ def _load_photo3d(spec: PhotoSpec, log: Log) -> Tuple[Photo3D, Tuple[int, int]]:
     return p3d, image.original_size
 
 
+def prefetch_style(style_rgb: np.ndarray, encoder=None) -> Future:
+    """Start the style CNN on ``style_rgb`` (h, w, 3) in a worker thread while the caller builds the 3D photo.
+
+    The two stages are independent and torch releases the GIL in its kernels, so the CNN runs on the core
+    that the photo's depth and LDI (mostly single-threaded numpy and OpenCV) leave idle. The future's result
+    is the :class:`~stylize3d_core.models.style_features.StyleEncoder` (``encoder``, or a new one) whose
+    feature cache (:func:`~stylize3d_core.stylize.style_feature_cache`) holds the features: pass it as
+    ``Stylized3DPhoto(..., style_encoder=)`` and ``set_style(style_rgb)`` skips the CNN. The cache key
+    includes the autocast state, which is per thread: under a caller's autocast the features are simply
+    computed again. ``result()`` re-raises the worker's error.
+    """
+    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="style-cnn")
+    try:
+        return pool.submit(_style_features, style_rgb, encoder)
+    finally:
+        pool.shutdown(wait=False)  # the thread ends after its one task
+
+
+def _style_features(style_rgb: np.ndarray, encoder):
+    import torch
+
+    from .models.style_features import StyleEncoder
+    from .stylize import style_feature_cache, style_tensor
+
+    encoder = StyleEncoder() if encoder is None else encoder
+    with torch.inference_mode():
+        style_feature_cache(encoder).features(style_tensor(style_rgb))
+    return encoder
+
+
 def job_cameras(job: RenderJob, fov_y_deg: float, loaded: Optional[CameraPath] = None) -> Tuple[Cameras, float]:
     """The cameras and fps a job renders: its camera path (``loaded``, else read from its file), else its
     trajectory."""
@@ -278,11 +309,13 @@ def _check_style_inputs(job: RenderJob):
     return settings, style, resolve_model(job.model)
 
 
-def _stylized(p3d: Photo3D, job: RenderJob, settings, style, model: str, timings: Dict[str, float], log: Log):
+def _stylized(p3d: Photo3D, job: RenderJob, settings, style, model: str, timings: Dict[str, float], log: Log,
+              prefetch: Optional[Future] = None):
     from .stylize import Stylized3DPhoto
 
     t0 = time.perf_counter()
-    stylized = Stylized3DPhoto(p3d, model, settings)  # given the path, its errors name the checkpoint
+    encoder = None if prefetch is None else prefetch.result()  # the style CNN ran while the photo loaded
+    stylized = Stylized3DPhoto(p3d, model, settings, style_encoder=encoder)  # given the path, errors name it
     stylized.set_style(style)
     timings["model"] = time.perf_counter() - t0
     log(f"style {job.style} at strength {job.strength:g} with {model}")
@@ -300,6 +333,7 @@ def run_render(job: RenderJob, *, progress: Optional[Progress] = None, log: Log 
             and loaded_path.fps > MAX_GIF_FPS:
         raise InputError(job.camera_path, f"its {loaded_path.fps:g} fps is too fast for a GIF "
                                           f"(at most {MAX_GIF_FPS:g})")
+    prefetch = prefetch_style(style_inputs[1]) if style_inputs is not None else None
     file_size = None  # the photo file's (H, W), for a layered job's mask (never multi-view)
     if job.views is None:
         p3d, file_size = _load_photo3d(job.spec, log)
@@ -321,7 +355,7 @@ def run_render(job: RenderJob, *, progress: Optional[Progress] = None, log: Log 
     if job.exports.save_trajectory is not None:
         write_camera_path(job.exports.save_trajectory, cameras, fmt="open3d", fps=fps, image_size=(H, W))
         log(f"wrote {job.exports.save_trajectory} (Open3D PinholeCameraTrajectory)")
-    renderer = _renderer(p3d, job, style_inputs, timings, log, file_size)
+    renderer = _renderer(p3d, job, style_inputs, timings, log, file_size, prefetch)
     t0 = time.perf_counter()
     if job.exports.export in POINT_KINDS:
         from .export.run import export_points
@@ -340,12 +374,12 @@ def run_render(job: RenderJob, *, progress: Optional[Progress] = None, log: Log 
 
 
 def _renderer(p3d: Photo3D, job: RenderJob, style_inputs, timings: Dict[str, float], log: Log,
-              file_size: Optional[Tuple[int, int]]):
+              file_size: Optional[Tuple[int, int]], prefetch: Optional[Future] = None):
     """What renders the job's views: the plain renderer, the stylized photo, or its layered composition."""
     if job.style is None:
         return PlainRenderer(p3d.points, PlainRenderSettings(supersample=job.supersample))
     if not job.layers.active:
-        return _stylized(p3d, job, *style_inputs, timings, log)
+        return _stylized(p3d, job, *style_inputs, timings, log, prefetch)
     from .export.layered import LayeredRenderer, photo_mask
     from .scene.masks import point_mask
 
@@ -353,7 +387,7 @@ def _renderer(p3d: Photo3D, job: RenderJob, style_inputs, timings: Dict[str, flo
     kept = "unstylized" if job.layers.foreground_strength is None else \
         f"at strength {job.layers.foreground_strength:g}"
     log(f"foreground mask: {mask.mean():.0%} of the photo kept {kept}")
-    stylized = _stylized(p3d, job, *style_inputs, timings, log)
+    stylized = _stylized(p3d, job, *style_inputs, timings, log, prefetch)
     return LayeredRenderer(p3d, point_mask(p3d.ldi, mask), stylized,
                            foreground_strength=job.layers.foreground_strength,
                            settings=PlainRenderSettings(supersample=job.supersample))

@@ -6,9 +6,10 @@ resident memory is its own. The 1 MP process (the sample photo resized to 1 MP, 
 style CNN loaded beforehand (not counted):
 
 * first frame: photo file + style image -> the first stylized 512-pixel frame (open3d.core, which the
-  geometry's k-NN imports, is imported first and timed apart) (read, prior depth,
-  LDI, points, geometry, encoding, style CNN, AdaAttN, upsampling, rasterization, decode), in seconds
-  of wall time and of the process's CPU time (all threads; steadier on a shared machine);
+  geometry's k-NN imports, is imported first and timed apart): read, prior depth, LDI, points, with
+  the style CNN in a worker thread meanwhile (``pipeline.prefetch_style``, as ``stylize3d render``
+  does), then geometry, encoding, AdaAttN, upsampling, rasterization, decode; in seconds of wall
+  time and of the process's CPU time (all threads; steadier on a shared machine);
 * the viewer's preview (256 pixels on the long side, ``preview=True``: a point subset of
   ``StylizeSettings.preview_points_per_pixel``) and a full 512-pixel frame: the median over
   cameras of the circle after one warm-up each;
@@ -75,7 +76,7 @@ def measure(megapixels: float, frame: int, preview: int, video_frames: int, rend
     from ..io.video import write_video
     from ..models.checkpoint import load_checkpoint
     from ..models.style_features import StyleEncoder
-    from ..pipeline import PhotoSpec, RenderJob, load_photo3d
+    from ..pipeline import PhotoSpec, RenderJob, load_photo3d, prefetch_style
     from ..render.plain import frame_size
     from ..resources import resolve_model, style_image
     from ..stylize import Stylized3DPhoto, StylizeSettings
@@ -92,9 +93,11 @@ def measure(megapixels: float, frame: int, preview: int, video_frames: int, rend
     with tempfile.TemporaryDirectory() as tmp:
         path = photo_at_megapixels(megapixels, Path(tmp), photo)
         t0, c0 = time.perf_counter(), time.process_time()
+        style = load_image(style_path, max_size=512).rgb
+        prefetch = prefetch_style(style, encoder)  # the style CNN runs while the photo's depth and LDI are built
         p3d = load_photo3d(PhotoSpec(photo=str(path), depth="prior", max_size=8192))
-        st = Stylized3DPhoto(p3d, ck, style_encoder=encoder)
-        st.set_style(load_image(style_path, max_size=512).rgb)
+        st = Stylized3DPhoto(p3d, ck, style_encoder=prefetch.result())
+        st.set_style(style)
         H, W = frame_size(p3d.size, frame)
         cams = circle(max(video_frames, 90), fov_y_deg=p3d.fov_y_deg)
         st.render(cams[0], H, W)
