@@ -98,6 +98,9 @@ class EncoderConfig:
 
 # ----------------------------------------------------------------------------- functions
 
+_NARROW_CHANNELS = 4
+"""Up to this many feature channels, :func:`neighbour_max` pools one channel at a time (inference only)."""
+
 
 def neighbour_max(features: torch.Tensor, neighbour_idx: torch.Tensor) -> torch.Tensor:
     """Channel-wise max of the neighbours' features: ``out[i] = max_j features[neighbour_idx[i, j]]``.
@@ -118,6 +121,15 @@ def neighbour_max(features: torch.Tensor, neighbour_idx: torch.Tensor) -> torch.
     if neighbour_idx.numel() and (int(neighbour_idx.min()) < 0 or int(neighbour_idx.max()) >= features.shape[0]):
         raise InputError("neighbour_idx", f"indices must lie in [0, {features.shape[0]})")
     track = features.requires_grad and torch.is_grad_enabled()
+    if not track and features.shape[1] <= _NARROW_CHANNELS:
+        # A few channels (the stem's RGB): rows of 12 bytes make the column loop below a loop of
+        # tiny copies; one channel at a time, gathering all M x k values and taking the row max, is
+        # ~2x faster for the 300k-point stem (max is exact: the same values).
+        cols = features.t().contiguous()  # (C, N)
+        out = features.new_empty(neighbour_idx.shape[0], features.shape[1])  # (M, C)
+        for c in range(cols.shape[0]):
+            torch.amax(cols[c].take(neighbour_idx), dim=1, out=out[:, c])  # (M,)
+        return out
     # A running maximum over the k columns: a few (M, C) buffers and no (M, k, C)
     # tensor; on the project's busy 2-core CPU 2-4x faster than gather + amax.
     cols = neighbour_idx.t().contiguous()  # (k, M)

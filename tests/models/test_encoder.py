@@ -87,6 +87,9 @@ def test_neighbour_max_paths_agree_and_ties_go_to_the_first():
     nbr = torch.randint(0, 100, (77, 5), generator=g)
     ref = feats[nbr].amax(dim=1)
     assert torch.equal(neighbour_max(feats, nbr), ref)  # no-grad path
+    for c in (1, 3, 4):  # the no-grad path of narrow features (the stem's RGB): one channel at a time
+        assert torch.equal(neighbour_max(feats[:, :c], nbr), ref[:, :c])
+        assert torch.equal(neighbour_max(feats[:, 1 : 1 + c].double(), nbr), ref[:, 1 : 1 + c].double())
     f = feats.clone().requires_grad_(True)
     out = neighbour_max(f, nbr)  # autograd path
     assert torch.equal(out, ref)
