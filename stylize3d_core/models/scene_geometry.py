@@ -278,7 +278,9 @@ def encoder_subset(n: int, max_points: int, seed: int = 0) -> torch.Tensor:
     if n <= max_points:
         return torch.arange(n)
     g = torch.Generator().manual_seed(int(seed))
-    return torch.randperm(n, generator=g)[:max_points].sort().values
+    keep = torch.zeros(n, dtype=torch.bool)
+    keep[torch.randperm(n, generator=g)[:max_points]] = True
+    return keep.nonzero().squeeze(1)  # ascending: the sorted subset, without a sort
 
 
 def prepare_geometry(

@@ -68,6 +68,7 @@ def test_prepare_geometry_is_ndc_subset_hierarchy_and_idw(cloud, cloud_size):
     assert tuple(geom.ndc) == tuple(params)
     idx = encoder_subset(n, 600, 5)
     assert idx.numel() == 600 and bool((idx[1:] > idx[:-1]).all()) and torch.equal(geom.encoder_idx, idx)
+    assert torch.equal(idx, torch.randperm(n, generator=torch.Generator().manual_seed(5))[:600].sort().values)
     scale = radius_scale(size, 600, n)
     ref = build_hierarchy(ndc[idx], cfg, scale)
     assert geom.hierarchy.scale == scale and geom.hierarchy.num_points == ref.num_points
