@@ -16,6 +16,11 @@ k-NN) costs in proportion to the points inside each ball, not to k: 0.07 / 1.0 /
 is about as fast as Open3D (0.12 / 0.8 / 2.1 s) but scipy is not a runtime
 dependency.
 
+A :class:`KNNIndex` keeps the tree of one cloud for several searches, and
+:func:`ball_from_knn` turns one k-NN result into the ball query of any radius
+(and, row by row, of any subset of its queries): the encoder's hierarchy
+(:mod:`stylize3d_core.models.scene_geometry`) makes one search per level that way.
+
 The search itself is not differentiable and does not need to be: neighbourhoods
 depend only on point positions, which are fixed for a photo. All searches run in
 float32.
