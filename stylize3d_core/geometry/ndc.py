@@ -47,9 +47,10 @@ def ndc_params(z: torch.Tensor, fov_y_deg: float, aspect: float) -> NDCParams:
     if not aspect > 0 or not math.isfinite(aspect):
         raise InputError("aspect", f"must be positive, got {aspect}")
     near = 0.99 * zmin
-    # torch.quantile has an input size limit (16M); a sort-based quantile has not.
-    zs = torch.sort(z.double()).values
-    q95 = float(zs[min(len(zs) - 1, int(round(0.95 * (len(zs) - 1))))])
+    # The 95th percentile as the k-th smallest depth (torch.quantile has an input size limit, 16M;
+    # kthvalue needs no full sort): the same value as sorting and indexing.
+    k = min(z.numel() - 1, int(round(0.95 * (z.numel() - 1))))
+    q95 = float(torch.kthvalue(z.double(), k + 1).values)
     far = max(q95, 2.0 * near)
     cot = 1.0 / math.tan(math.radians(check_fov(fov_y_deg)) / 2.0)
     return NDCParams(near, far, float(aspect), cot)

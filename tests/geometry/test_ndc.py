@@ -64,3 +64,11 @@ def test_bad_fov_and_aspect():
         ndc_params(torch.ones(3), 0.0, 1.0)
     with pytest.raises(InputError):
         ndc_params(torch.ones(3), 60.0, 0.0)
+
+
+@pytest.mark.parametrize("n", [1, 2, 7, 20, 1001])
+def test_far_plane_is_the_95th_percentile_of_a_sort(n):
+    z = torch.rand(n, generator=torch.Generator().manual_seed(n)) * 10 + 0.1
+    zs = torch.sort(z.double()).values
+    q95 = float(zs[min(n - 1, int(round(0.95 * (n - 1))))])
+    assert ndc_params(z, 60.0, 1.5).far == max(q95, 2.0 * 0.99 * float(z.min()))
