@@ -62,6 +62,11 @@ class StylizeSettings:
         final_points_per_pixel: None (default): full frames rasterize every point. A number: full frames
             keep about this many points per output (super)pixel, as previews do (a prefix of the point
             order), where more would land on each pixel (``bench speed`` measures the error).
+        decode_scale: 1 (default), or s = 2..8: full frames decode split-resolution (models with the colour
+            transform; ``models/decoder.py``): the U-Net runs on features rasterized at 1/s of the frame's
+            size per side (from a point prefix at that size's budget, when ``final_points_per_pixel`` is
+            set), while the detail colours and their coverage are rasterized at the full size.
+        preview_decode_scale: the same for previews (default 1).
     """
 
     strength: float = 0.8
@@ -69,8 +74,14 @@ class StylizeSettings:
     preview_points_per_pixel: float = 3.0
     seed: int = 0
     final_points_per_pixel: Optional[float] = None
+    decode_scale: int = 1
+    preview_decode_scale: int = 1
 
     def __post_init__(self) -> None:
+        for name in ("decode_scale", "preview_decode_scale"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 8:
+                raise InputError(name, f"must be an integer from 1 to 8, got {value!r}")
         check_range(self.strength, "strength", 0.0, 1.0)
         if self.supersample not in (1, 2):
             raise InputError("supersample", f"must be 1 or 2, got {self.supersample!r}")
@@ -295,18 +306,22 @@ class Stylized3DPhoto:
             self._update_dense()
         n = self.num_points
         if preview:
-            keep = self._strata.prefix(preview_point_count(n, height, width, self.settings.preview_points_per_pixel))
-            ss = 1
+            ss, scale, per_pixel = 1, self.settings.preview_decode_scale, self.settings.preview_points_per_pixel
         else:
-            ss = self.settings.supersample
-            per_pixel = self.settings.final_points_per_pixel
-            keep = n if per_pixel is None else self._strata.prefix(
-                preview_point_count(n, height * ss, width * ss, per_pixel))
+            ss, scale, per_pixel = (self.settings.supersample, self.settings.decode_scale,
+                                    self.settings.final_points_per_pixel)
+        if not self.model.config.decoder.transform_channels:
+            scale = 1  # split-resolution decoding needs the colour transform: full-size decoding
+        budget = (lambda h, w: n) if per_pixel is None else \
+            (lambda h, w: self._strata.prefix(preview_point_count(n, h * ss, w * ss, per_pixel)))
+        keep = budget(height, width)
+        split = {} if scale == 1 else {"decode_scale": scale,
+                                       "decode_points": budget(-(-height // scale), -(-width // scale))}
         with torch.inference_mode():
             if should_stop is not None and should_stop():
                 raise RenderInterrupted("render stopped before rasterizing")
             rgb, _ = self.model.render_view(self._dense[:keep], self._xyz[:keep], camera, height, width,
-                                            supersample=ss, should_stop=should_stop)
+                                            supersample=ss, should_stop=should_stop, **split)
             rgb = torch.nan_to_num(rgb.float(), nan=0.0).clamp_(0.0, 1.0)  # float32 after a bfloat16 autocast
         return rgb.permute(1, 2, 0).contiguous().numpy()
 
