@@ -47,6 +47,7 @@ from .models.style_features import StyleEncoder, StyleFeatures
 from .models.scene_geometry import SceneGeometry, prepare_geometry
 from .models.stylize3d import Stylize3DModel
 from .render.plain import StratifiedOrder, preview_point_count
+from .render.rasterizer import columns
 from .scene.photo3d import Photo3D
 
 
@@ -63,9 +64,8 @@ class StylizeSettings:
             keep about this many points per output (super)pixel, as previews do (a prefix of the point
             order), where more would land on each pixel (``bench speed`` measures the error).
         decode_scale: 1 (default), or s = 2..8: full frames decode split-resolution (models with the colour
-            transform; ``models/decoder.py``): the U-Net runs on features rasterized at 1/s of the frame's
-            size per side (from a point prefix at that size's budget, when ``final_points_per_pixel`` is
-            set), while the detail colours and their coverage are rasterized at the full size.
+            transform; ``models/decoder.py``): the frame is rasterized once, the U-Net decodes its features
+            pooled to 1/s of the frame's size per side, and recolours the full-size detail colours.
         preview_decode_scale: the same for previews (default 1).
     """
 
@@ -192,7 +192,8 @@ class Stylized3DPhoto:
         t2 = time.perf_counter()
         self._strata = StratifiedOrder(self._geom.xyz.shape[0], settings.seed)
         self._order = self._strata.order  # (N,)
-        self._xyz = self._geom.xyz.index_select(0, self._order).contiguous()  # (N, 3), in self._order
+        # (N, 3) in self._order, stored as (3, N) (render.rasterizer.columns: the camera transform's fast layout)
+        self._xyz = columns(self._geom.xyz.index_select(0, self._order))
         self._stylized: Optional[torch.Tensor] = None  # (M, C) at strength 1
         self._stylized2: Optional[torch.Tensor] = None  # (M, C) of the second style, at strength 1
         self._style_stats: Optional[LabStats] = None  # colour statistics of the style (detail_transfer)
@@ -312,11 +313,9 @@ class Stylized3DPhoto:
                                     self.settings.final_points_per_pixel)
         if not self.model.config.decoder.transform_channels:
             scale = 1  # split-resolution decoding needs the colour transform: full-size decoding
-        budget = (lambda h, w: n) if per_pixel is None else \
-            (lambda h, w: self._strata.prefix(preview_point_count(n, h * ss, w * ss, per_pixel)))
-        keep = budget(height, width)
-        split = {} if scale == 1 else {"decode_scale": scale,
-                                       "decode_points": budget(-(-height // scale), -(-width // scale))}
+        keep = n if per_pixel is None else self._strata.prefix(preview_point_count(n, height * ss, width * ss,
+                                                                                   per_pixel))
+        split = {} if scale == 1 else {"decode_scale": scale}
         with torch.inference_mode():
             if should_stop is not None and should_stop():
                 raise RenderInterrupted("render stopped before rasterizing")

@@ -34,8 +34,9 @@ the ``width``-channel layers run at 1/2 and 1/4 resolution.
 **Split-resolution decoding** (``forward(..., detail=(d, m))``, ``StylizeSettings.decode_scale``):
 with the colour transform, a covered pixel's colour is mostly the rasterized detail colour ``d``; the
 U-Net's own output matters in holes and partly covered pixels, and ``A, b`` are a smooth field anyway.
-So the U-Net can run on features rasterized at a reduced size (h, w) while ``d`` and its coverage ``m``
-come at the output size (H, W): everything the U-Net outputs (``rgb``; the coefficients, already
+So the U-Net can run on the rasterized features pooled to a reduced size (h, w) (:func:`pool_features`:
+one rasterization at the output size, the mean of each block's covered pixels) while ``d`` and its
+coverage ``m`` stay at the output size (H, W): everything the U-Net outputs (``rgb``; the coefficients, already
 1 / 2**levels of its size) is upsampled bilinearly over the image's extent to (H, W), and the transform
 is applied there. With the shipped ``lite`` weights (``A = I, b = 0``) covered pixels are exactly the
 full-resolution render; only holes and their rims differ (``bench speed`` measures it).
@@ -175,6 +176,23 @@ def supersample_pool(features: torch.Tensor, mask: torch.Tensor) -> Tuple[torch.
     coverage = F.avg_pool2d(mask, 2)  # (B, 1, H, W)
     summed = F.avg_pool2d(features * mask, 2)  # (B, C, H, W); exactly 0 where coverage is 0
     return summed / coverage.clamp_min(1e-6), coverage
+
+
+def pool_features(features: torch.Tensor, coverage: torch.Tensor, scale: int) -> Tuple[torch.Tensor, torch.Tensor]:
+    """Rasterized features at 1/``scale`` per side for split-resolution decoding: (B, C, H, W) (0 at holes),
+    coverage (B, 1, H, W) in {0, 1} -> (B, C, ceil(H / s), ceil(W / s)), mask (B, 1, ...) in {0, 1}.
+
+    Each block of s x s pixels (zero-padded at the bottom/right: holes) becomes the mean of its covered
+    pixels, and is covered when any of them is (as a raster of that size, where a point covers the
+    pixel it lands in); a block without any is a hole (features 0). The memory format is kept.
+    """
+    if scale == 1:
+        return features, coverage
+    features, coverage = pad_to_multiple(features, scale), pad_to_multiple(coverage, scale)
+    share = F.avg_pool2d(coverage, scale)  # (B, 1, h, w): covered fraction of each block
+    pooled = F.avg_pool2d(features, scale)  # features are 0 at holes: the block's sum / s^2
+    mask = (share > 0).to(features.dtype)
+    return pooled / share.clamp_min(1.0 / (scale * scale)), mask
 
 
 IDENTITY_TRANSFORM = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)

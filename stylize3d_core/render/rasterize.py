@@ -329,8 +329,12 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
             x0f, y0f = ag.floor(), bg_.floor()
             offs = torch.arange(1 - r, r + 1, device=dev, dtype=dtype)  # (2r,) tap offsets per axis
             xs, ys = x0f + offs[:, None], y0f + offs[:, None]  # (2r, mg)
-            wx = (1.0 - (xs - ag).abs() / hg).clamp_min(0.0)  # (2r, mg) tent of half-width hg
-            wy = (1.0 - (ys - bg_).abs() / hg).clamp_min(0.0)
+            if point_size is None:  # half-width 1: the division is exact, skip it
+                wx = (1.0 - (xs - ag).abs()).clamp_min_(0.0)  # (2r, mg) tent of half-width 1
+                wy = (1.0 - (ys - bg_).abs()).clamp_min_(0.0)
+            else:
+                wx = (1.0 - (xs - ag).abs() / hg).clamp_min(0.0)  # (2r, mg) tent of half-width hg
+                wy = (1.0 - (ys - bg_).abs() / hg).clamp_min(0.0)
             if r > 1:  # every point deposits a total weight of 1 (the bilinear weights already do)
                 # summed row by row (element-wise, in a fixed order): a reduction kernel's order can
                 # depend on the number of points, and the result must not depend on the chunking
@@ -427,7 +431,8 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
         c00 = cat1([p[4] for p in tested[1]])
     elif s == 1 and len(tested) == 0:
         c00 = torch.zeros(0, dtype=torch.long, device=dev)
-    cat = (lambda xs, like: torch.cat(xs) if xs else torch.zeros(0, dtype=like, device=dev))
+    cat = (lambda xs, like: (xs[0] if len(xs) == 1 else torch.cat(xs)) if xs else
+           torch.zeros(0, dtype=like, device=dev))
     return _Splats(cat1(survivors), cat(entry_point, torch.long), cat(pixel, torch.long), cat(weight, dtype),
                    cat(kept, torch.bool), depth.clone(), taps, c00,
                    cat(back_w, dtype) if blend else None, cat(cover, dtype) if blend else None)

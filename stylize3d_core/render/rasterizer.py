@@ -8,15 +8,33 @@ and rasterizes.
 
 from __future__ import annotations
 
-from typing import Callable, Optional, Tuple
+from typing import Callable, Optional
 
 import torch
 from torch import nn
 
 from ..checks import check_shape
 from ..errors import InputError
-from ..geometry.camera import Cameras, transform_points
+from ..geometry.camera import Cameras
 from .rasterize import Fragments, RasterSettings, rasterize_points
+
+
+def camera_points(world_to_cam: torch.Tensor, points_world: torch.Tensor) -> torch.Tensor:
+    """(N, 3) points in the camera frame, as a view of a contiguous (3, N) tensor (each coordinate's
+    column contiguous: the projection reads them ~2x faster).
+
+    ``R @ P + t`` with P = ``points_world.t()``: ~20x faster than ``points @ R.T`` when ``points_world``
+    is itself such a view (:func:`columns`, as ``Stylized3DPhoto`` keeps its points), ~2x otherwise.
+    The same transform as :func:`~stylize3d_core.geometry.camera.transform_points` up to float rounding.
+    """
+    rot, t = world_to_cam[:3, :3], world_to_cam[:3, 3:]
+    return torch.addmm(t, rot, points_world.t()).t()
+
+
+def columns(points: torch.Tensor) -> torch.Tensor:
+    """(N, 3) ``points`` laid out as a contiguous (3, N) tensor, viewed as (N, 3) (a prefix ``[:n]`` keeps
+    the layout): the fast input of :class:`PointRasterizer`."""
+    return points.t().contiguous().t()
 
 
 class PointRasterizer(nn.Module):
@@ -34,8 +52,7 @@ class PointRasterizer(nn.Module):
 
     def forward(self, points_world: torch.Tensor, features: torch.Tensor, cameras: Cameras,
                 point_size: Optional[torch.Tensor] = None, *,
-                should_stop: Optional[Callable[[], bool]] = None,
-                frame: Optional[Tuple[int, int]] = None) -> Fragments:
+                should_stop: Optional[Callable[[], bool]] = None) -> Fragments:
         """Render ``features`` at ``points_world`` from the single camera in ``cameras``.
 
         Args:
@@ -46,10 +63,6 @@ class PointRasterizer(nn.Module):
                 grows with magnification, see :func:`rasterize_points`).
             should_stop: checked between chunks of points (see :func:`rasterize_points`);
                 True stops with :class:`~stylize3d_core.errors.RenderInterrupted`.
-            frame: (H, W) of the frame this raster stands for (None: the raster's own size). The
-                intrinsics are the camera's at (H, W), scaled to the raster's size per axis, so the
-                raster covers exactly the frame's extent: a (h, w) raster upsampled bilinearly
-                (``align_corners=False``) lines up with the (H, W) one (split-resolution decoding).
         Returns:
             :class:`Fragments` ``image (C, H, W), weight (H, W), depth (H, W), hole (H, W)``.
         """
@@ -62,18 +75,8 @@ class PointRasterizer(nn.Module):
         check_shape(points_world, "points_world", (None, 3))
         dtype, device = points_world.dtype, points_world.device
         world_to_cam = cameras.world_to_cam()[0].to(device=device, dtype=dtype)  # (4, 4)
-        points_cam = transform_points(world_to_cam, points_world.detach())  # (N, 3)
-        h, w = self.settings.height, self.settings.width
-        if frame is None or tuple(frame) == (h, w):
-            K = cameras.intrinsics(h, w, dtype=dtype)[0].to(device)  # (3, 3)
-        else:
-            fh, fw = (int(v) for v in frame)
-            if fh < 1 or fw < 1:
-                raise InputError("frame", f"must be a positive (height, width), got {tuple(frame)!r}")
-            K = cameras.intrinsics(fh, fw, dtype=dtype)[0].clone()
-            K[0] *= w / fw  # fx, cx
-            K[1] *= h / fh  # fy, cy
-            K = K.to(device)
+        points_cam = camera_points(world_to_cam, points_world.detach())  # (N, 3)
+        K = cameras.intrinsics(self.settings.height, self.settings.width, dtype=dtype)[0].to(device)  # (3, 3)
         return rasterize_points(points_cam, features, K, self.settings, point_size, should_stop=should_stop)
 
     def extra_repr(self) -> str:

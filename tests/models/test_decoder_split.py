@@ -13,7 +13,7 @@ from stylize3d_core.geometry.camera import Cameras
 from stylize3d_core.models import decoder as decoder_module
 from stylize3d_core.models.adaattn import AdaAttNConfig
 from stylize3d_core.models.decoder import (DecoderConfig, UNetDecoder, apply_colour_transform, constant_transform,
-                                           identity_transform, upsample_to)
+                                           identity_transform, pool_features, upsample_to)
 from stylize3d_core.models.encoder import EncoderConfig
 from stylize3d_core.models.scene_geometry import prepare_geometry
 from stylize3d_core.models.stylize3d import ModelConfig, Stylize3DModel
@@ -189,8 +189,25 @@ TINY = ModelConfig(
 )
 
 
+def test_pool_features_known_values():
+    """Blocks of s x s: the mean of the covered pixels; covered when any is; odd sizes pad with holes."""
+    cover = torch.tensor([[1, 0, 0, 0, 1], [1, 0, 0, 0, 0], [0, 0, 1, 1, 1]], dtype=torch.float32)[None, None]
+    feats = torch.arange(15, dtype=torch.float32).view(1, 1, 3, 5).repeat(1, 2, 1, 1) * cover
+    feats[:, 1] *= -1
+    pooled, mask = pool_features(feats, cover, 2)
+    assert pooled.shape == (1, 2, 2, 3) and mask.shape == (1, 1, 2, 3)
+    want = torch.tensor([[(0 + 5) / 2, 0.0, 4.0], [0.0, (12 + 13) / 2, 14.0]])
+    torch.testing.assert_close(pooled[0, 0], want)
+    torch.testing.assert_close(pooled[0, 1], -want)
+    torch.testing.assert_close(mask[0, 0], torch.tensor([[1.0, 0.0, 1.0], [0.0, 1.0, 1.0]]))
+    nhwc = feats.contiguous(memory_format=torch.channels_last)
+    out, _ = pool_features(nhwc, cover, 2)
+    torch.testing.assert_close(out, pooled)
+    assert pool_features(feats, cover, 1)[0] is feats
+
+
 def test_render_view_split_resolution(cloud, small_strips):
-    """decode_scale 2: covered pixels show the full-size colour pass, the fragments are that pass's; the
+    """decode_scale 2: covered pixels show the full-size colours, the fragments are the frame's; the
     stoppable path gives the same frame and stops; bad scales and models without the transform are refused."""
     pts, fov = cloud
     torch.manual_seed(0)
@@ -201,17 +218,17 @@ def test_render_view_split_resolution(cloud, small_strips):
         dense = model.dense_features(model.encode(geom), geom)
         rgb, frags = model.render_view(dense, geom.xyz, cam, 47, 63, decode_scale=2)
         assert rgb.shape == (3, 47, 63) and torch.isfinite(rgb).all()
-        colours = PointRasterizer(RasterSettings(height=47, width=63))(geom.xyz, dense[:, -3:].contiguous(), cam)
-        torch.testing.assert_close(frags.image, colours.image, rtol=0, atol=0)
-        covered = ~colours.hole
-        torch.testing.assert_close(rgb[:, covered], colours.image.clamp(0, 1)[:, covered], rtol=0, atol=1e-6)
+        whole = PointRasterizer(RasterSettings(height=47, width=63))(geom.xyz, dense, cam)
+        torch.testing.assert_close(frags.image, whole.image, rtol=0, atol=0)
+        covered = ~whole.hole
+        torch.testing.assert_close(rgb[:, covered], whole.image[-3:].clamp(0, 1)[:, covered], rtol=0, atol=1e-6)
+        full = model.render_view(dense, geom.xyz, cam, 47, 63)[0]
+        assert (rgb - full).abs().amax(dim=0)[covered].max() <= 1e-6  # only holes differ from decode_scale 1
         total = Counter()
         stopped = model.render_view(dense, geom.xyz, cam, 47, 63, should_stop=total, decode_scale=2)[0]
         torch.testing.assert_close(stopped, rgb, rtol=0, atol=1e-6)
         with pytest.raises(RenderInterrupted):
             model.render_view(dense, geom.xyz, cam, 47, 63, should_stop=Counter(total.calls), decode_scale=2)
-        fewer = model.render_view(dense, geom.xyz, cam, 47, 63, decode_scale=2, decode_points=500)[0]
-        torch.testing.assert_close(fewer[:, covered], rgb[:, covered], rtol=0, atol=1e-6)  # holes may differ
     for bad in (0, 9, 1.5, True):
         with pytest.raises(InputError, match="decode_scale"):
             model.render_view(dense, geom.xyz, cam, 24, 32, decode_scale=bad)

@@ -1,40 +1,50 @@
-"""PointRasterizer: a raster smaller than the frame it stands for (``frame=``) covers the frame's extent."""
+"""PointRasterizer's camera transform in the (3, N) layout: the same points as transform_points (up to rounding)."""
 
 from __future__ import annotations
 
-import pytest
+import math
+
 import torch
 
-from stylize3d_core.errors import InputError
-from stylize3d_core.geometry.camera import Cameras, unproject
+from stylize3d_core.geometry.camera import Cameras, transform_points
 from stylize3d_core.render.rasterize import RasterSettings
-from stylize3d_core.render.rasterizer import PointRasterizer
+from stylize3d_core.render.rasterizer import PointRasterizer, camera_points, columns
 
 
-def _point_at(u: float, v: float, cam: Cameras, frame) -> torch.Tensor:
-    """(1, 3) world point that projects to (u, v) of a ``frame``-sized image of ``cam`` (identity pose)."""
-    K = cam.intrinsics(*frame, dtype=torch.float64)[0]
-    return unproject(torch.tensor([[u, v]], dtype=torch.float64), torch.tensor([2.0], dtype=torch.float64), K).float()
+def _pose() -> torch.Tensor:
+    pose = torch.eye(4, dtype=torch.float64)
+    a = 0.3
+    pose[:3, :3] = torch.tensor([[math.cos(a), 0, math.sin(a)], [0, 1, 0], [-math.sin(a), 0, math.cos(a)]],
+                                dtype=torch.float64)
+    pose[:3, 3] = torch.tensor([0.1, -0.2, 0.05], dtype=torch.float64)
+    return pose
 
 
-@pytest.mark.parametrize("frame,small", [((20, 30), (10, 15)), ((21, 31), (11, 16)), ((40, 64), (10, 16))])
-def test_small_raster_of_a_frame_lines_up_with_bilinear_upsampling(frame, small):
-    """A point at frame pixel coordinates (u, v) lands at (u w / W, v h / H) of the small raster: the
-    grid that ``F.interpolate(align_corners=False)`` maps onto the frame."""
-    cam = Cameras.identity(50.0)
-    (H, W), (h, w) = frame, small
-    i, j = 3, 5  # the small raster's pixel whose centre the point hits
-    u, v = (j + 0.5) * W / w, (i + 0.5) * H / h
-    xyz = _point_at(u, v, cam, frame)
-    frags = PointRasterizer(RasterSettings(height=h, width=w))(xyz, torch.ones(1, 1), cam, frame=frame)
-    assert frags.weight[i, j].item() == pytest.approx(1.0, abs=1e-4)
-    assert frags.weight.sum().item() == pytest.approx(1.0, abs=1e-5)
-    same = PointRasterizer(RasterSettings(height=H, width=W))(xyz, torch.ones(1, 1), cam, frame=frame)
-    plain = PointRasterizer(RasterSettings(height=H, width=W))(xyz, torch.ones(1, 1), cam)
-    assert torch.equal(same.weight, plain.weight)  # frame = the raster's own size: unchanged
+def test_camera_points_equal_transform_points_in_either_layout():
+    g = torch.Generator().manual_seed(0)
+    pts = torch.randn(1000, 3, generator=g, dtype=torch.float64)
+    T = _pose()
+    want = transform_points(T, pts)
+    for given in (pts, columns(pts), columns(pts)[:600]):
+        got = camera_points(T, given)
+        assert got.shape == given.shape
+        torch.testing.assert_close(got, want[:given.shape[0]], rtol=0, atol=1e-12)
+        assert got[:, 0].is_contiguous()  # each coordinate's column is contiguous
 
 
-def test_bad_frame():
-    cam = Cameras.identity(50.0)
-    with pytest.raises(InputError, match="frame"):
-        PointRasterizer(RasterSettings(height=4, width=4))(torch.zeros(1, 3), torch.ones(1, 1), cam, frame=(0, 8))
+def test_columns_keeps_values_and_a_prefix_keeps_the_layout():
+    pts = torch.arange(12, dtype=torch.float32).view(4, 3)
+    c = columns(pts)
+    assert torch.equal(c, pts) and c.stride() == (1, 4)
+    assert c[:2].t().stride() == (4, 1)
+
+
+def test_rasterizer_gives_the_same_frame_from_either_layout():
+    g = torch.Generator().manual_seed(1)
+    pts = torch.randn(500, 3, generator=g) * 0.3 + torch.tensor([0.0, 0.0, 2.0])
+    feats = torch.rand(500, 4, generator=g)
+    cam = Cameras.create(_pose(), 50.0)
+    rast = PointRasterizer(RasterSettings(height=24, width=32))
+    a, b = rast(pts, feats, cam), rast(columns(pts), feats, cam)
+    torch.testing.assert_close(a.image, b.image, rtol=0, atol=1e-5)  # the transform rounds per layout
+    assert (a.hole != b.hole).sum() <= 1
