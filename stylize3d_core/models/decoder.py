@@ -189,10 +189,30 @@ def pool_features(features: torch.Tensor, coverage: torch.Tensor, scale: int) ->
     if scale == 1:
         return features, coverage
     features, coverage = pad_to_multiple(features, scale), pad_to_multiple(coverage, scale)
-    share = F.avg_pool2d(coverage, scale)  # (B, 1, h, w): covered fraction of each block
-    pooled = F.avg_pool2d(features, scale)  # features are 0 at holes: the block's sum / s^2
-    mask = (share > 0).to(features.dtype)
-    return pooled / share.clamp_min(1.0 / (scale * scale)), mask
+    b, c, hp, wp = features.shape
+    h, w = hp // scale, wp // scale
+    summed = _block_sums(features.permute(0, 2, 3, 1), scale)  # (B, h, w, C); a view of channels-last memory
+    count = _block_sums(coverage.permute(0, 2, 3, 1), scale)  # (B, h, w, 1): covered pixels per block
+    pooled = (summed / count.clamp_min(1.0)).permute(0, 3, 1, 2)  # (B, C, h, w), channels-last
+    if not features.is_contiguous(memory_format=torch.channels_last) or c == 1:
+        pooled = pooled.contiguous()
+    return pooled, (count > 0).to(features.dtype).permute(0, 3, 1, 2).contiguous()
+
+
+def _block_sums(x: torch.Tensor, s: int) -> torch.Tensor:
+    """(B, H, W, C) -> (B, H / s, W / s, C): sums of s x s blocks, added row by row then column by column
+    (element-wise adds of strided slices: ~10x faster on CPU than ``avg_pool2d`` or a multi-axis ``sum``
+    of a channels-last image)."""
+    b, hp, wp, c = x.shape
+    rows = x.reshape(b, hp // s, s, wp, c)
+    acc = rows[:, :, 0] + rows[:, :, 1]  # (s >= 2) a new tensor: no copy of the first slice
+    for k in range(2, s):
+        acc += rows[:, :, k]
+    cols = acc.view(b, hp // s, wp // s, s, c)
+    out = cols[:, :, :, 0] + cols[:, :, :, 1]
+    for k in range(2, s):
+        out += cols[:, :, :, k]
+    return out
 
 
 IDENTITY_TRANSFORM = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
@@ -295,9 +315,6 @@ def _assemble(features: torch.Tensor, mask: torch.Tensor, multiple: int, channel
               should_stop: StopCheck) -> torch.Tensor:
     """``[features | mask]`` zero-padded to a multiple of ``multiple`` (B, C + 1, Hp, Wp), NHWC with
     ``channels_last``; with ``should_stop``, copied in strips of rows with a check before each."""
-    if should_stop is None:
-        x = pad_to_multiple(torch.cat([features, mask], dim=1), multiple)
-        return x.contiguous(memory_format=torch.channels_last) if channels_last else x
     b, c, h, w = features.shape
     hp, wp = h + (-h) % multiple, w + (-w) % multiple
     x = torch.empty((b, c + 1, hp, wp), dtype=features.dtype, device=features.device,
@@ -305,7 +322,9 @@ def _assemble(features: torch.Tensor, mask: torch.Tensor, multiple: int, channel
     if hp > h or wp > w:  # the padding: holes (features 0, mask 0)
         x[:, :, h:].zero_()
         x[:, :, :h, w:].zero_()
-    rows = max(1, STRIP_MACS // (20 * b * (c + 1) * w))  # a copy costs ~1/20 of a multiply-add's budget
+    # one allocation, the padding zeroed, the rest copied once; in strips with a check before each when
+    # stoppable (a copy costs ~1/20 of a multiply-add's budget)
+    rows = h if should_stop is None else max(1, STRIP_MACS // (20 * b * (c + 1) * w))
     for r0 in range(0, h, rows):
         _stop(should_stop)
         r1 = min(h, r0 + rows)
