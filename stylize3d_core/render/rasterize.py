@@ -342,11 +342,18 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
                 wy = wy / _row_sum(wy)
             T, mg = 4 * r * r, ag.shape[0]
             w = (wy[:, None] * wx[None]).reshape(T, mg)  # (T, mg), row = dy * 2r + dx
-            xi = xs.long()[None].expand(2 * r, -1, -1).reshape(T, mg)  # (T, mg)
-            yi = ys.long()[:, None].expand(-1, 2 * r, -1).reshape(T, mg)
-            ok = (w > 0) & (xi >= 0) & (xi < Ws) & (yi >= 0) & (yi < Hs)
-            q = torch.where(ok, yi * Ws + xi, 0)  # (T, mg) raster index
-            o = yi * W + xi if s == 1 else (yi >> 1) * W + (xi >> 1)  # (T, mg) output pixel of each tap
+            # per axis (2r, mg), then combined: the same as testing the (T, mg) taps
+            xl, yl = xs.long(), ys.long()
+            ok = ((yl >= 0) & (yl < Hs))[:, None] & ((xl >= 0) & (xl < Ws))[None]  # (2r, 2r, mg)
+            ok = ok.reshape(T, mg) & (w > 0)
+            raster = (yl * Ws)[:, None] + xl[None]  # (2r, 2r, mg): yi * Ws + xi
+            raster = raster.reshape(T, mg)
+            q = torch.where(ok, raster, 0)  # (T, mg) raster index
+            if s == 1:
+                o = raster  # (T, mg) output pixel of each tap
+            else:
+                o = ((yl >> 1) * W)[:, None] + (xl >> 1)[None]
+                o = o.reshape(T, mg)
             zbuf.scatter_reduce_(0, q.reshape(-1), torch.where(ok, zg, math.inf).reshape(-1), reduce="amin")
             # Front-setting taps: a tap too faint to show its point on its own (weight below the
             # hole threshold) must not hide the surface behind it either.
