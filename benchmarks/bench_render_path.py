@@ -59,10 +59,12 @@ def main() -> None:
     variants = [  # name, settings, preview, size
         ("full: all points, decode 1", base, False, (H, W)),
         ("full: 6 pts/px, decode 1", replace(base, final_points_per_pixel=6.0), False, (H, W)),
-        ("full: 6 pts/px, decode 1/2", replace(base, final_points_per_pixel=6.0, decode_scale=2), False, (H, W)),
         ("full: all points, decode 1/2", replace(base, decode_scale=2), False, (H, W)),
+        ("full: 6 pts/px, decode 1/2", replace(base, final_points_per_pixel=6.0, decode_scale=2), False, (H, W)),
         ("preview 3 pts/px, decode 1", base, True, (h, w)),
         ("preview 3 pts/px, decode 1/2", replace(base, preview_decode_scale=2), True, (h, w)),
+        ("preview 4 pts/px, decode 1/2", replace(base, preview_points_per_pixel=4.0, preview_decode_scale=2), True,
+         (h, w)),
     ]
     print(f"photo {photo} {p3d.size[1]}x{p3d.size[0]}, {st.num_points:,} points; frames {W}x{H}, previews {w}x{h}; "
           f"torch threads {torch.get_num_threads()}")

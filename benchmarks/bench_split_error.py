@@ -52,6 +52,8 @@ def main() -> None:
         ("final: decode 1/4", replace(base, decode_scale=4), False),
         ("preview 3 pts/px, decode 1", base, True),
         ("preview 3 pts/px, decode 1/2", replace(base, preview_decode_scale=2), True),
+        ("preview 4 pts/px, decode 1/2", replace(base, preview_points_per_pixel=4.0, preview_decode_scale=2), True),
+        ("preview 6 pts/px, decode 1/2", replace(base, preview_points_per_pixel=6.0, preview_decode_scale=2), True),
     ]
     res = {name: [] for name, _, _ in variants}
     for photo in args.photos or sample_names():
