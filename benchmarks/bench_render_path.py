@@ -65,6 +65,8 @@ def main() -> None:
         ("preview 3 pts/px, decode 1/2", replace(base, preview_decode_scale=2), True, (h, w)),
         ("preview 4 pts/px, decode 1/2", replace(base, preview_points_per_pixel=4.0, preview_decode_scale=2), True,
          (h, w)),
+        ("preview 6 pts/px, decode 1/2", replace(base, preview_points_per_pixel=6.0, preview_decode_scale=2), True,
+         (h, w)),
     ]
     print(f"photo {photo} {p3d.size[1]}x{p3d.size[0]}, {st.num_points:,} points; frames {W}x{H}, previews {w}x{h}; "
           f"torch threads {torch.get_num_threads()}")
