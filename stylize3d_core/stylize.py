@@ -47,6 +47,7 @@ from .models.style_features import StyleEncoder, StyleFeatures
 from .models.scene_geometry import SceneGeometry, prepare_geometry
 from .models.stylize3d import Stylize3DModel
 from .render.plain import StratifiedOrder, preview_point_count
+from .render.rasterizer import columns
 from .scene.photo3d import Photo3D
 
 
@@ -62,6 +63,10 @@ class StylizeSettings:
         final_points_per_pixel: None (default): full frames rasterize every point. A number: full frames
             keep about this many points per output (super)pixel, as previews do (a prefix of the point
             order), where more would land on each pixel (``bench speed`` measures the error).
+        decode_scale: 1 (default), or s = 2..8: full frames decode split-resolution (models with the colour
+            transform; ``models/decoder.py``): the frame is rasterized once, the U-Net decodes its features
+            pooled to 1/s of the frame's size per side, and recolours the full-size detail colours.
+        preview_decode_scale: the same for previews (default 1).
     """
 
     strength: float = 0.8
@@ -69,8 +74,14 @@ class StylizeSettings:
     preview_points_per_pixel: float = 3.0
     seed: int = 0
     final_points_per_pixel: Optional[float] = None
+    decode_scale: int = 1
+    preview_decode_scale: int = 1
 
     def __post_init__(self) -> None:
+        for name in ("decode_scale", "preview_decode_scale"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 8:
+                raise InputError(name, f"must be an integer from 1 to 8, got {value!r}")
         check_range(self.strength, "strength", 0.0, 1.0)
         if self.supersample not in (1, 2):
             raise InputError("supersample", f"must be 1 or 2, got {self.supersample!r}")
@@ -181,7 +192,8 @@ class Stylized3DPhoto:
         t2 = time.perf_counter()
         self._strata = StratifiedOrder(self._geom.xyz.shape[0], settings.seed)
         self._order = self._strata.order  # (N,)
-        self._xyz = self._geom.xyz.index_select(0, self._order).contiguous()  # (N, 3), in self._order
+        # (N, 3) in self._order, stored as (3, N) (render.rasterizer.columns: the camera transform's fast layout)
+        self._xyz = columns(self._geom.xyz.index_select(0, self._order))
         up = self._geom.upsample  # the upsampling and the colours in self._order: dense features come out ordered
         self._in_order = self._geom._replace(
             rgb=self._geom.rgb.index_select(0, self._order),
@@ -299,18 +311,20 @@ class Stylized3DPhoto:
             self._update_dense()
         n = self.num_points
         if preview:
-            keep = self._strata.prefix(preview_point_count(n, height, width, self.settings.preview_points_per_pixel))
-            ss = 1
+            ss, scale, per_pixel = 1, self.settings.preview_decode_scale, self.settings.preview_points_per_pixel
         else:
-            ss = self.settings.supersample
-            per_pixel = self.settings.final_points_per_pixel
-            keep = n if per_pixel is None else self._strata.prefix(
-                preview_point_count(n, height * ss, width * ss, per_pixel))
+            ss, scale, per_pixel = (self.settings.supersample, self.settings.decode_scale,
+                                    self.settings.final_points_per_pixel)
+        if not self.model.config.decoder.transform_channels:
+            scale = 1  # split-resolution decoding needs the colour transform: full-size decoding
+        keep = n if per_pixel is None else self._strata.prefix(preview_point_count(n, height * ss, width * ss,
+                                                                                   per_pixel))
+        split = {} if scale == 1 else {"decode_scale": scale}
         with torch.inference_mode():
             if should_stop is not None and should_stop():
                 raise RenderInterrupted("render stopped before rasterizing")
             rgb, _ = self.model.render_view(self._dense[:keep], self._xyz[:keep], camera, height, width,
-                                            supersample=ss, should_stop=should_stop)
+                                            supersample=ss, should_stop=should_stop, **split)
             rgb = torch.nan_to_num(rgb.float(), nan=0.0).clamp_(0.0, 1.0)  # float32 after a bfloat16 autocast
         return rgb.permute(1, 2, 0).contiguous().numpy()
 

@@ -2,8 +2,9 @@
 
 The reference is the full-quality float32 render: every point, supersample 1,
 the preset's frame size, torch's default threads, the decoder's channels-last
-layout. Each variant changes one knob (point budget, render resolution,
-supersampling, bfloat16 autocast of the decoder / the style CNN, the decoder's
+layout, full-size decoding. Each variant changes one knob (point budget, render resolution,
+split-resolution decoding (``StylizeSettings.decode_scale``: the U-Net at 1/2 or 1/4 per side, the
+detail colours at full size), supersampling, bfloat16 autocast of the decoder / the style CNN, the decoder's
 memory layout, threads) and is compared with the reference on the same
 cameras: PSNR and the EfficientNet perceptual distance
 (``eval.consistency.masked_feature_distance`` with a full mask: unit-normalised
@@ -80,6 +81,8 @@ class Variant:
     channels_first: bool = False  # the decoder in NCHW (the reference is channels-last, DecoderConfig's default)
     threads: Optional[int] = None
     slow: bool = False  # timed once without a warm-up (bfloat16 emulated in software is ~10x slower)
+    decode_scale: int = 1  # split-resolution decoding: the U-Net at 1/decode_scale per side (final and preview)
+    final_points_per_pixel: Optional[float] = None  # StylizeSettings.final_points_per_pixel of full frames
 
     @property
     def final(self) -> bool:
@@ -93,6 +96,12 @@ def variants(quick: bool) -> List[Variant]:
     out += [Variant(f"preview {p:g} pts/px", "point budget", preview_points_per_pixel=p)
             for p in ((1.0,) if quick else (1.0, 2.0, 3.0, 6.0))]
     out += [Variant(f"render at {s:g}x, upscaled", "resolution", scale=s) for s in ((0.5,) if quick else (0.5, 0.75))]
+    out += [Variant("decode at 1/2, colours at full size", "decode scale", decode_scale=2)]
+    if not quick:
+        out += [Variant("decode at 1/2, 6 pts/px", "decode scale", decode_scale=2, final_points_per_pixel=6.0),
+                Variant("decode at 1/4, colours at full size", "decode scale", decode_scale=4),
+                Variant("preview 3 pts/px, decode at 1/2", "decode scale", preview_points_per_pixel=3.0,
+                        decode_scale=2)]
     out += [Variant("supersample 2", "supersampling", supersample=2)]
     if quick:
         out += [Variant("bfloat16 decoder + style CNN", "bfloat16", bf16_decoder=True, bf16_style=True)]
@@ -155,7 +164,8 @@ class SpeedScene:
     instance: Optional[object] = None
 
     @contextlib.contextmanager
-    def stylized(self, supersample: int = 1, per_pixel: float = 3.0):
+    def stylized(self, supersample: int = 1, per_pixel: float = 3.0, decode_scale: int = 1,
+                 final_per_pixel: Optional[float] = None):
         """The one ``Stylized3DPhoto`` of the scene, with these settings while the context lasts (its
         settings are read at render time, so the cached geometry and features are shared by every variant)."""
         from ..stylize import Stylized3DPhoto
@@ -165,7 +175,9 @@ class SpeedScene:
             self.instance.set_style(self.style)
         s = self.instance
         before = s.settings
-        s.settings = replace(before, supersample=supersample, preview_points_per_pixel=per_pixel)
+        s.settings = replace(before, supersample=supersample, preview_points_per_pixel=per_pixel,
+                             decode_scale=decode_scale, preview_decode_scale=decode_scale,
+                             final_points_per_pixel=final_per_pixel)
         try:
             yield s
         finally:
@@ -214,7 +226,8 @@ class VariantRun:
     def __enter__(self) -> "VariantRun":
         v = self.v
         self._stack = contextlib.ExitStack()
-        self.s = self._stack.enter_context(self.scene.stylized(v.supersample, v.preview_points_per_pixel or 3.0))
+        self.s = self._stack.enter_context(self.scene.stylized(v.supersample, v.preview_points_per_pixel or 3.0,
+                                                               v.decode_scale, v.final_points_per_pixel))
         self._threads = torch.get_num_threads()
         self._config = self.s.model.decoder.config
         if v.threads is not None:

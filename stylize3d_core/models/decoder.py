@@ -41,6 +41,20 @@ adds it to a trained model.
 The full-resolution layers are narrow (``width / 4`` channels for 2 levels);
 the ``width``-channel layers run at 1/2 and 1/4 resolution.
 
+**Split-resolution decoding** (``forward(..., detail=(d, m))``, ``StylizeSettings.decode_scale``):
+with the colour transform, a covered pixel's colour is mostly the rasterized detail colour ``d``; the
+U-Net's own output matters in holes and partly covered pixels, and ``A, b`` are a smooth field anyway.
+So the U-Net can run on the rasterized features pooled to a reduced size (h, w) (:func:`pool_features`:
+one rasterization at the output size, the mean of each block's covered pixels) while ``d`` and its
+coverage ``m`` stay at the output size (H, W): everything the U-Net outputs (``rgb``; the coefficients, already
+1 / 2**levels of its size) is upsampled bilinearly over the image's extent to (H, W), and the transform
+is applied there. With the shipped ``lite`` weights (``A = I, b = 0``) covered pixels are exactly the
+full-resolution render; only holes and their rims differ (``bench speed`` measures it).
+
+**Constant transform:** under ``torch.no_grad``/``inference_mode``, a head whose weights are all zero
+(the shipped ``lite`` checkpoint's) gives the same coefficients at every pixel, its bias: the head's
+convolution and the full-resolution upsampling of 12 channels are skipped (:func:`constant_transform`).
+
 **Sizes.** H and W need not be divisible by ``2**levels``: the input is
 zero-padded at the bottom/right (padding counts as holes: features 0, mask 0)
 and the output cropped back.
@@ -184,6 +198,43 @@ def supersample_pool(features: torch.Tensor, mask: torch.Tensor) -> Tuple[torch.
     return summed / coverage.clamp_min(1e-6), coverage
 
 
+def pool_features(features: torch.Tensor, coverage: torch.Tensor, scale: int) -> Tuple[torch.Tensor, torch.Tensor]:
+    """Rasterized features at 1/``scale`` per side for split-resolution decoding: (B, C, H, W) (0 at holes),
+    coverage (B, 1, H, W) in {0, 1} -> (B, C, ceil(H / s), ceil(W / s)), mask (B, 1, ...) in {0, 1}.
+
+    Each block of s x s pixels (zero-padded at the bottom/right: holes) becomes the mean of its covered
+    pixels, and is covered when any of them is (as a raster of that size, where a point covers the
+    pixel it lands in); a block without any is a hole (features 0). The memory format is kept.
+    """
+    if scale == 1:
+        return features, coverage
+    features, coverage = pad_to_multiple(features, scale), pad_to_multiple(coverage, scale)
+    b, c, hp, wp = features.shape
+    h, w = hp // scale, wp // scale
+    summed = _block_sums(features.permute(0, 2, 3, 1), scale)  # (B, h, w, C); a view of channels-last memory
+    count = _block_sums(coverage.permute(0, 2, 3, 1), scale)  # (B, h, w, 1): covered pixels per block
+    pooled = (summed / count.clamp_min(1.0)).permute(0, 3, 1, 2)  # (B, C, h, w), channels-last
+    if not features.is_contiguous(memory_format=torch.channels_last) or c == 1:
+        pooled = pooled.contiguous()
+    return pooled, (count > 0).to(features.dtype).permute(0, 3, 1, 2).contiguous()
+
+
+def _block_sums(x: torch.Tensor, s: int) -> torch.Tensor:
+    """(B, H, W, C) -> (B, H / s, W / s, C): sums of s x s blocks, added row by row then column by column
+    (element-wise adds of strided slices: ~10x faster on CPU than ``avg_pool2d`` or a multi-axis ``sum``
+    of a channels-last image)."""
+    b, hp, wp, c = x.shape
+    rows = x.reshape(b, hp // s, s, wp, c)
+    acc = rows[:, :, 0] + rows[:, :, 1]  # (s >= 2) a new tensor: no copy of the first slice
+    for k in range(2, s):
+        acc += rows[:, :, k]
+    cols = acc.view(b, hp // s, wp // s, s, c)
+    out = cols[:, :, :, 0] + cols[:, :, :, 1]
+    for k in range(2, s):
+        out += cols[:, :, :, k]
+    return out
+
+
 TEXTURE_SCALE = 0.5
 """The texture residual's range: ``r`` in (-TEXTURE_SCALE, TEXTURE_SCALE) per channel."""
 
@@ -287,9 +338,6 @@ def _assemble(features: torch.Tensor, mask: torch.Tensor, multiple: int, channel
               should_stop: StopCheck) -> torch.Tensor:
     """``[features | mask]`` zero-padded to a multiple of ``multiple`` (B, C + 1, Hp, Wp), NHWC with
     ``channels_last``; with ``should_stop``, copied in strips of rows with a check before each."""
-    if should_stop is None:
-        x = pad_to_multiple(torch.cat([features, mask], dim=1), multiple)
-        return x.contiguous(memory_format=torch.channels_last) if channels_last else x
     b, c, h, w = features.shape
     hp, wp = h + (-h) % multiple, w + (-w) % multiple
     x = torch.empty((b, c + 1, hp, wp), dtype=features.dtype, device=features.device,
@@ -297,7 +345,9 @@ def _assemble(features: torch.Tensor, mask: torch.Tensor, multiple: int, channel
     if hp > h or wp > w:  # the padding: holes (features 0, mask 0)
         x[:, :, h:].zero_()
         x[:, :, :h, w:].zero_()
-    rows = max(1, STRIP_MACS // (20 * b * (c + 1) * w))  # a copy costs ~1/20 of a multiply-add's budget
+    # one allocation, the padding zeroed, the rest copied once; in strips with a check before each when
+    # stoppable (a copy costs ~1/20 of a multiply-add's budget)
+    rows = h if should_stop is None else max(1, STRIP_MACS // (20 * b * (c + 1) * w))
     for r0 in range(0, h, rows):
         _stop(should_stop)
         r1 = min(h, r0 + rows)
@@ -322,8 +372,12 @@ def apply_colour_transform(rgb: torch.Tensor, colours: torch.Tensor, coverage: t
     (B, 12, h', w') over the zero-padded frame of size ``padded`` (rows of ``A``
     first, then ``b``): upsampled bilinearly to ``padded``, then cropped to (H, W);
     ``texture`` ``r``: (B, 3, H, W) or None (0).
+    Coefficients of size (B, 12, 1, 1) are one transform for the whole frame
+    (:func:`constant_transform`): no upsampling, and ``A = I, b = 0`` is ``rgb + m (d - rgb)``.
     """
     b, _, h, w = rgb.shape
+    if coefficients.shape[-2:] == (1, 1):
+        return _apply_constant_transform(rgb, colours, coverage, coefficients[:, :, 0, 0], texture)
     full = F.interpolate(coefficients, size=padded, mode="bilinear", align_corners=False)[..., :h, :w]
     a = full[:, :9].reshape(b, 3, 3, h, w)
     delta = colours.to(rgb.dtype) - rgb  # (B, 3, H, W)
@@ -331,6 +385,39 @@ def apply_colour_transform(rgb: torch.Tensor, colours: torch.Tensor, coverage: t
     if texture is not None:
         mixed = mixed + texture.to(rgb.dtype)
     return (rgb + coverage * mixed).clamp(0.0, 1.0)
+
+
+def constant_transform(head: nn.Conv2d) -> Optional[torch.Tensor]:
+    """The head's coefficients (1, 12, 1, 1) when they do not depend on the features (its weights are all
+    zero, as in a new decoder and the shipped ``lite`` checkpoint: the bias alone), else None."""
+    if head.weight.count_nonzero() != 0:
+        return None
+    return head.bias.detach().view(1, -1, 1, 1)
+
+
+def _apply_constant_transform(rgb: torch.Tensor, colours: torch.Tensor, coverage: torch.Tensor,
+                              coefficients: torch.Tensor, texture: Optional[torch.Tensor] = None) -> torch.Tensor:
+    """:func:`apply_colour_transform` with one transform (B, 12) for the whole frame."""
+    b = rgb.shape[0]
+    delta = colours.to(rgb.dtype) - rgb  # (B, 3, H, W)
+    coefficients = coefficients.to(rgb.dtype).expand(b, -1)
+    identity = torch.tensor(IDENTITY_TRANSFORM, dtype=rgb.dtype, device=rgb.device)
+    if not bool((coefficients == identity).all()):
+        delta = torch.einsum("bij,bjhw->bihw", coefficients[:, :9].reshape(b, 3, 3), delta) \
+            + coefficients[:, 9:, None, None]
+    if texture is not None:
+        delta = delta + texture.to(rgb.dtype)
+    if torch.is_grad_enabled():
+        return (rgb + coverage * delta).clamp(0.0, 1.0)
+    return rgb.addcmul_(coverage, delta).clamp_(0.0, 1.0)  # rgb is the decoder's own new tensor
+
+
+def upsample_to(x: torch.Tensor, size: Tuple[int, int]) -> torch.Tensor:
+    """(B, C, h, w) -> (B, C, H, W), bilinear over the image's extent (``align_corners=False``): the pixel
+    grid of a frame rasterized at (h, w) over the same image extent (split-resolution decoding)."""
+    if tuple(x.shape[-2:]) == tuple(size):
+        return x
+    return F.interpolate(x, size=tuple(size), mode="bilinear", align_corners=False)
 
 
 class _Down(nn.Module):
@@ -403,8 +490,15 @@ class UNetDecoder(nn.Module):
             if not torch.isfinite(t.sum()):  # a sum is finite when every value is (one pass, no (B, C, H, W) bools)
                 check_finite(t, name)
 
-    def forward(self, features: torch.Tensor, mask: torch.Tensor, should_stop: StopCheck = None) -> torch.Tensor:
+    def forward(self, features: torch.Tensor, mask: torch.Tensor, should_stop: StopCheck = None, *,
+                detail: Optional[Tuple[torch.Tensor, torch.Tensor]] = None) -> torch.Tensor:
+        """``detail``: split-resolution decoding (see the module docstring): the detail colours
+        (B, 3, H, W) and their coverage (B, 1, H, W) at the output size, while ``features`` and ``mask``
+        come at a smaller size; the U-Net's outputs are upsampled to (H, W) and the colour transform
+        recolours these colours. Needs the colour transform (``transform_channels`` 3)."""
         self._check(features, mask)
+        if detail is not None:
+            detail = self._check_detail(features, detail)
         mask = mask.to(features.dtype)
         if self.config.supersample:
             features, mask = supersample_pool(features, mask)
@@ -424,8 +518,36 @@ class UNetDecoder(nn.Module):
         texture = TEXTURE_SCALE * torch.tanh(y[:, 3:]) if self.config.texture_channels else None
         if self.transform is not None:
             padded = (coarse.shape[-2] * 2**self.config.levels, coarse.shape[-1] * 2**self.config.levels)
-            gain = self.config.transform_gain
-            coefficients = _layer(self.transform, coarse * gain if gain != 1.0 else coarse, should_stop)
+            coefficients = None if torch.is_grad_enabled() else constant_transform(self.transform)
+            if coefficients is None:
+                gain = self.config.transform_gain
+                coefficients = _layer(self.transform, coarse * gain if gain != 1.0 else coarse, should_stop)
             _stop(should_stop)
+            if detail is not None:  # the U-Net's outputs at the decoding size, upsampled to the detail's
+                colours, mask = detail
+                out_size = tuple(colours.shape[-2:])
+                rgb = upsample_to(rgb, out_size)
+                if texture is not None:
+                    texture = upsample_to(texture, out_size)
+                if coefficients.shape[-2:] != (1, 1):
+                    coefficients = upsample_to(coefficients, padded)[..., :h, :w]
+                padded = out_size
             rgb = apply_colour_transform(rgb, colours, mask, coefficients, padded, texture)
         return rgb.contiguous()
+
+    def _check_detail(self, features: torch.Tensor, detail) -> Tuple[torch.Tensor, torch.Tensor]:
+        if self.transform is None:
+            raise InputError("detail", "split-resolution decoding needs the colour transform (transform_channels 3)")
+        if self.config.supersample:
+            raise InputError("detail", "split-resolution decoding does not take a supersampling decoder")
+        colours, coverage = detail
+        b = features.shape[0]
+        if colours.dim() != 4 or tuple(colours.shape[:2]) != (b, self.config.transform_channels):
+            raise InputError("detail colours", f"expected shape ({b}, 3, H, W), got {tuple(colours.shape)}")
+        if tuple(coverage.shape) != (b, 1) + tuple(colours.shape[-2:]):
+            raise InputError("detail coverage", f"expected shape ({b}, 1, {colours.shape[-2]}, {colours.shape[-1]}), "
+                             f"got {tuple(coverage.shape)}")
+        for t, name in ((colours, "detail colours"), (coverage, "detail coverage")):
+            if not torch.isfinite(t.sum()):
+                check_finite(t, name)
+        return colours, coverage.to(features.dtype)

@@ -30,7 +30,7 @@ from ..scene.ldi import INPAINTED, ORIGINAL
 from ..scene.pointcloud import PointCloud, PointTensors
 from .holes import fill_holes
 from .rasterize import Fragments, RasterSettings
-from .rasterizer import PointRasterizer
+from .rasterizer import PointRasterizer, columns
 
 
 @dataclass(frozen=True)
@@ -211,7 +211,7 @@ class PlainRenderer:
         t = points if isinstance(points, PointTensors) else points.to_tensors()
         self._strata = StratifiedOrder(t.xyz.shape[0], settings.seed)
         order = self._strata.order
-        self._xyz = t.xyz.index_select(0, order)  # (N, 3)
+        self._xyz = columns(t.xyz.index_select(0, order))  # (N, 3), stored as (3, N) (the fast layout)
         self._rgb = t.rgb.index_select(0, order)  # (N, 3)
         self._size: Optional[torch.Tensor] = None  # (N,) footprint of each point, scene units
         self._grid: Optional[Tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = None

@@ -329,8 +329,12 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
             x0f, y0f = ag.floor(), bg_.floor()
             offs = torch.arange(1 - r, r + 1, device=dev, dtype=dtype)  # (2r,) tap offsets per axis
             xs, ys = x0f + offs[:, None], y0f + offs[:, None]  # (2r, mg)
-            wx = (1.0 - (xs - ag).abs() / hg).clamp_min(0.0)  # (2r, mg) tent of half-width hg
-            wy = (1.0 - (ys - bg_).abs() / hg).clamp_min(0.0)
+            if point_size is None:  # half-width 1: the division is exact, skip it
+                wx = (1.0 - (xs - ag).abs()).clamp_min_(0.0)  # (2r, mg) tent of half-width 1
+                wy = (1.0 - (ys - bg_).abs()).clamp_min_(0.0)
+            else:
+                wx = (1.0 - (xs - ag).abs() / hg).clamp_min(0.0)  # (2r, mg) tent of half-width hg
+                wy = (1.0 - (ys - bg_).abs() / hg).clamp_min(0.0)
             if r > 1:  # every point deposits a total weight of 1 (the bilinear weights already do)
                 # summed row by row (element-wise, in a fixed order): a reduction kernel's order can
                 # depend on the number of points, and the result must not depend on the chunking
@@ -338,11 +342,18 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
                 wy = wy / _row_sum(wy)
             T, mg = 4 * r * r, ag.shape[0]
             w = (wy[:, None] * wx[None]).reshape(T, mg)  # (T, mg), row = dy * 2r + dx
-            xi = xs.long()[None].expand(2 * r, -1, -1).reshape(T, mg)  # (T, mg)
-            yi = ys.long()[:, None].expand(-1, 2 * r, -1).reshape(T, mg)
-            ok = (w > 0) & (xi >= 0) & (xi < Ws) & (yi >= 0) & (yi < Hs)
-            q = torch.where(ok, yi * Ws + xi, 0)  # (T, mg) raster index
-            o = yi * W + xi if s == 1 else (yi >> 1) * W + (xi >> 1)  # (T, mg) output pixel of each tap
+            # per axis (2r, mg), then combined: the same as testing the (T, mg) taps
+            xl, yl = xs.long(), ys.long()
+            ok = ((yl >= 0) & (yl < Hs))[:, None] & ((xl >= 0) & (xl < Ws))[None]  # (2r, 2r, mg)
+            ok = ok.reshape(T, mg) & (w > 0)
+            raster = (yl * Ws)[:, None] + xl[None]  # (2r, 2r, mg): yi * Ws + xi
+            raster = raster.reshape(T, mg)
+            q = torch.where(ok, raster, 0)  # (T, mg) raster index
+            if s == 1:
+                o = raster  # (T, mg) output pixel of each tap
+            else:
+                o = ((yl >> 1) * W)[:, None] + (xl >> 1)[None]
+                o = o.reshape(T, mg)
             zbuf.scatter_reduce_(0, q.reshape(-1), torch.where(ok, zg, math.inf).reshape(-1), reduce="amin")
             # Front-setting taps: a tap too faint to show its point on its own (weight below the
             # hole threshold) must not hide the surface behind it either.
@@ -427,7 +438,8 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
         c00 = cat1([p[4] for p in tested[1]])
     elif s == 1 and len(tested) == 0:
         c00 = torch.zeros(0, dtype=torch.long, device=dev)
-    cat = (lambda xs, like: torch.cat(xs) if xs else torch.zeros(0, dtype=like, device=dev))
+    cat = (lambda xs, like: (xs[0] if len(xs) == 1 else torch.cat(xs)) if xs else
+           torch.zeros(0, dtype=like, device=dev))
     return _Splats(cat1(survivors), cat(entry_point, torch.long), cat(pixel, torch.long), cat(weight, dtype),
                    cat(kept, torch.bool), depth.clone(), taps, c00,
                    cat(back_w, dtype) if blend else None, cat(cover, dtype) if blend else None)

@@ -15,8 +15,26 @@ from torch import nn
 
 from ..checks import check_shape
 from ..errors import InputError
-from ..geometry.camera import Cameras, transform_points
+from ..geometry.camera import Cameras
 from .rasterize import Fragments, RasterSettings, rasterize_points
+
+
+def camera_points(world_to_cam: torch.Tensor, points_world: torch.Tensor) -> torch.Tensor:
+    """(N, 3) points in the camera frame, as a view of a contiguous (3, N) tensor (each coordinate's
+    column contiguous: the projection reads them ~2x faster).
+
+    ``R @ P + t`` with P = ``points_world.t()``: ~20x faster than ``points @ R.T`` when ``points_world``
+    is itself such a view (:func:`columns`, as ``Stylized3DPhoto`` keeps its points), ~2x otherwise.
+    The same transform as :func:`~stylize3d_core.geometry.camera.transform_points` up to float rounding.
+    """
+    rot, t = world_to_cam[:3, :3], world_to_cam[:3, 3:]
+    return torch.addmm(t, rot, points_world.t()).t()
+
+
+def columns(points: torch.Tensor) -> torch.Tensor:
+    """(N, 3) ``points`` laid out as a contiguous (3, N) tensor, viewed as (N, 3) (a prefix ``[:n]`` keeps
+    the layout): the fast input of :class:`PointRasterizer`."""
+    return points.t().contiguous().t()
 
 
 class PointRasterizer(nn.Module):
@@ -57,7 +75,7 @@ class PointRasterizer(nn.Module):
         check_shape(points_world, "points_world", (None, 3))
         dtype, device = points_world.dtype, points_world.device
         world_to_cam = cameras.world_to_cam()[0].to(device=device, dtype=dtype)  # (4, 4)
-        points_cam = transform_points(world_to_cam, points_world.detach())  # (N, 3)
+        points_cam = camera_points(world_to_cam, points_world.detach())  # (N, 3)
         K = cameras.intrinsics(self.settings.height, self.settings.width, dtype=dtype)[0].to(device)  # (3, 3)
         return rasterize_points(points_cam, features, K, self.settings, point_size, should_stop=should_stop)
 
