@@ -172,8 +172,12 @@ class StratifiedOrder:
         if n == 0:
             bounds = [0]
         self.bounds: List[int] = bounds
-        levels = [perm[lo:hi].sort().values for lo, hi in zip(bounds[:-1], bounds[1:])]
-        self.order = torch.cat(levels) if levels else perm
+        # each point's level (by its position in perm), then one stable sort by level: inside a level the
+        # original indices stay ascending (the same order as sorting each level's slice of perm, in one pass)
+        sizes = torch.tensor([hi - lo for lo, hi in zip(bounds[:-1], bounds[1:])], dtype=torch.int64)
+        key = torch.empty(n, dtype=torch.int32)
+        key[perm] = torch.repeat_interleave(torch.arange(len(sizes), dtype=torch.int32), sizes)
+        self.order = torch.sort(key, stable=True).indices if n else perm
 
     def prefix(self, count: int) -> int:
         """The smallest level boundary >= ``count`` (N if count > N)."""
