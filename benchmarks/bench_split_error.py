@@ -6,7 +6,7 @@ per variant the PSNR (median and worst) and the EfficientNet perceptual distance
 full-quality float32 render of the same size (every point, decode_scale 1): final frames at 512 px,
 previews at 256 px against the full-quality 256 px frame.
 
-    .venv/bin/python benchmarks/bench_split_error.py [--frames 3] [--size 512]
+    .venv/bin/python benchmarks/bench_split_error.py [--frames 3] [--size 512] [--model CKPT]
 """
 
 from __future__ import annotations
@@ -41,10 +41,11 @@ def main() -> None:
     ap.add_argument("--size", type=int, default=512)
     ap.add_argument("--preview-size", type=int, default=256)
     ap.add_argument("--photos", nargs="*", default=None, help="sample names (default: all)")
+    ap.add_argument("--model", default=None, help="checkpoint (default: the shipped model)")
     args = ap.parse_args()
     torch.set_num_threads(1)
     ck_path = ROOT / "assets" / "model" / "stylize3d_lite.safetensors"
-    ck = load_checkpoint(str(ck_path) if ck_path.exists() else resolve_model("lite"))
+    ck = load_checkpoint(args.model or (str(ck_path) if ck_path.exists() else resolve_model("lite")))
     dist = PerceptualDistance()
     base = StylizeSettings()
     variants = [  # name, settings, preview
