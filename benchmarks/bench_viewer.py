@@ -483,6 +483,21 @@ def window(model: str, megapixels: float, tmp: str, max_size: int, repeats: int,
               f"resize {ms('resize'):.2f}, Open3D image {ms('image'):.2f}, worker -> GUI thread {ms('post'):.1f}, "
               f"widget update {ms('update'):.2f}; frames replaced before the GUI thread took them: "
               f"{log[-1]['coalesced']}")
+    moves = sorted(stats.get("drag_moves", []))
+    firsts = []  # per drag: the first move received, the first frame's request, its wait, render, hand-over, shown
+    for down, up, _ in drags:
+        row = next((r for r in log if r["requested"] > down), None)
+        move = next((t for t in moves if t > down), None)
+        if row is not None and move is not None:
+            done = row["requested"] + row["wait"] + row["render"] + row["split"] + row["convert"] + row["image"]
+            firsts.append([move - down, row["requested"] - down, row["wait"], row["render"], row["post"],
+                           done + row["post"] + row["update"] - down, row["side"]])
+    if firsts:
+        f = np.median(np.array(firsts, np.float64), axis=0)
+        print(f"  mouse-down to first frame, by stage (medians of {len(firsts)} drags, ms): first move received "
+              f"{1000 * f[0]:.0f}, preview requested {1000 * f[1]:.0f}, waiting for the worker {1000 * f[2]:.0f}, "
+              f"render {1000 * f[3]:.0f} ({int(f[6])} px), worker -> GUI thread {1000 * f[4]:.0f}, on screen "
+              f"(widget updated) {1000 * f[5]:.0f}")
     gap_f, gap = stats.get("tick_gap_frame", []), stats.get("tick_gap", [])
     if gap_f and gap:
         print(f"  GUI loop turn after a new frame (its redraw) {1000 * med(gap_f):.0f} ms median "

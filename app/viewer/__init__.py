@@ -22,7 +22,6 @@ as ``stylize3d render``'s are; only the viewer's own options are written here.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from typing import List, Optional
 
@@ -62,9 +61,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--test-report", default=None, metavar="JSON", help="where the test script writes its report")
     return p
 
-
-SOFTWARE_RASTER_THREADS = 0
-"""``LP_NUM_THREADS`` of the viewer (a software renderer's rasterizer threads; 0: the drawing thread itself)."""
 
 GUI_SWITCH_INTERVAL_S = 0.0005
 """``sys.setswitchinterval`` of the viewer: how long a thread may hold the GIL before another takes it."""
@@ -122,11 +118,6 @@ def main(argv: Optional[List[str]] = None) -> int:
         except InputError as e:
             print(f"{PROG}: error: {e}", file=sys.stderr)
             return 2
-    # Open3D redraws the whole window for every mouse-motion event; with a software Vulkan (llvmpipe, as
-    # under Xvfb) each redraw woke llvmpipe's rasterizer threads, which on a loaded 2-core machine cost
-    # 0.53-0.66 cores during a drag against 0.38 when the drawing thread rasterizes itself (measured, load 8).
-    # Ignored by GPU drivers; an LP_NUM_THREADS already set is kept.
-    os.environ.setdefault("LP_NUM_THREADS", str(SOFTWARE_RASTER_THREADS))
     import open3d.visualization.gui as gui
     import torch
 
