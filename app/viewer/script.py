@@ -118,7 +118,9 @@ class ScriptRunner:
                     entry.update(ok=True, seconds=0.0)
                     self.results.append(entry)
                     self._write_report()
-                    self.main(self.window.request_close)
+                    # posted, not waited for: a wait that ends while the close has begun (a loaded machine)
+                    # raised "the window is closing" here and made a passing script exit with 1
+                    self.window.post(self.window.request_close)
                     return
                 handler = getattr(self, "op_" + op, None)
                 if handler is None:
