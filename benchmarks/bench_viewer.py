@@ -193,7 +193,7 @@ def interactive(model: str, megapixels: float, full_side: int, tmp: str, max_siz
             version = machine.version
 
             def fn():
-                return s.render_view(cam, size, display, preview=preview, stylized=True,
+                return s.render_view(cam, size, None, preview=preview, stylized=True,  # as the window: own size
                                      should_stop=None if cancel is None else cancel.is_set, calibrate=scale >= 1.0)
 
             worker.request_render(fn, lambda r: shown.put((time.perf_counter(), version, scale, r)),

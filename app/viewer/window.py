@@ -137,6 +137,7 @@ class ViewerWindow:
         self._last_tick: Optional[float] = None
         self._frame_mark: Optional[float] = None  # perf_counter when the last frame went to the widget
         self._label_at = -1.0  # monotonic time of the last statistics-label update
+        self._first_preview = True  # no preview of the current movement on screen yet (view_changed)
         self._drag: Optional[List[Any]] = None  # [mode, last x, last y]
         self._last_click = (-1.0, 0, 0)
         self._ctrl_down = False
@@ -493,12 +494,15 @@ class ViewerWindow:
     def view_changed(self) -> None:
         """The view changed: ask for a preview now (interrupting a full render in progress); the tick asks
         for the full frame once it rests (:class:`~app.viewer.render_state.RenderStateMachine`). The first
-        preview after a rest is the smallest (``min_preview_long_side``): it is what a new drag waits for."""
-        first = self.scheduler.phase is not RenderPhase.MOVING
+        preview after a rest is the smallest (``min_preview_long_side``), and so is every one requested
+        before a preview of this movement is on screen (a newer request replaces a waiting one): it is what
+        a new drag waits for."""
+        if self.scheduler.phase is not RenderPhase.MOVING:
+            self._first_preview = True
         change = self.scheduler.changed(time.monotonic())
         if change.interrupt:
             self.worker.interrupt_render()
-        self.request_render(preview=True, side=self.preview.min_preview_long_side if first else None)
+        self.request_render(preview=True, side=self.preview.min_preview_long_side if self._first_preview else None)
 
     def request_render(self, preview: bool, camera=None, side: Optional[int] = None) -> None:
         """Ask the worker for a frame of the view (or of ``camera``): a preview (of long side ``side``, else
@@ -561,6 +565,8 @@ class ViewerWindow:
             self._post(self._show_pending)
 
     def _show_pending(self) -> None:
+        """GUI thread: show the frame waiting in the slot, if any (posted by :meth:`_deliver`; a mouse drag
+        calls it too)."""
         with self._frame_lock:
             pending, self._pending_frame = self._pending_frame, None
         if pending is not None:
@@ -595,6 +601,7 @@ class ViewerWindow:
                                 times["split"], times["convert"], times["resize"], times["image"], t_main - res.finished,
                                 t_update - t_main, self._coalesced])
         if res.preview:
+            self._first_preview = False
             st["preview_latency"].append(latency)
             st["preview_seconds"].append(res.seconds)
             st["preview_shown"].append(time.monotonic())
@@ -695,6 +702,10 @@ class ViewerWindow:
             self._drag[1:] = [e.x, e.y]
             self.stats["drag_moves"].append(time.monotonic())
             self.drag(mode, e.x - x0, e.y - y0)
+            # Open3D handles every queued mouse event (each one redraws the window) before it runs posted
+            # functions: on a loaded machine a drag's events keep it busy and the posted frames waited until
+            # the mouse stopped (a second drag showed 1 frame in 1.7 s). The drag takes the newest frame itself.
+            self._show_pending()
             return gui.Widget.EventCallbackResult.CONSUMED
         if e.type == T.BUTTON_UP:
             self._drag = None
