@@ -193,7 +193,7 @@ def interactive(model: str, megapixels: float, full_side: int, tmp: str, max_siz
             version = machine.version
 
             def fn():
-                return s.render_view(cam, size, display, preview=preview, stylized=True,
+                return s.render_view(cam, size, None, preview=preview, stylized=True,  # as the window: own size
                                      should_stop=None if cancel is None else cancel.is_set, calibrate=scale >= 1.0)
 
             worker.request_render(fn, lambda r: shown.put((time.perf_counter(), version, scale, r)),
@@ -309,6 +309,46 @@ def window_figures(stats: Dict[str, list], drags: List[Tuple[float, float, bool]
     return out
 
 
+def thread_cpu(pid: int) -> Dict[int, Tuple[str, float]]:
+    """CPU seconds (user + system) of each thread of process ``pid``: {thread id: (name, seconds)}, from
+    /proc (empty where there is none)."""
+    out: Dict[int, Tuple[str, float]] = {}
+    tick = os.sysconf("SC_CLK_TCK")
+    try:
+        tids = os.listdir(f"/proc/{pid}/task")
+    except OSError:
+        return out
+    for tid in tids:
+        try:
+            raw = Path(f"/proc/{pid}/task/{tid}/stat").read_text()
+        except OSError:
+            continue
+        name = raw[raw.index("(") + 1:raw.rindex(")")]
+        fields = raw[raw.rindex(")") + 2:].split()
+        out[int(tid)] = (name, (int(fields[11]) + int(fields[12])) / tick)
+    return out
+
+
+def cpu_by_role(before: Dict[int, Tuple[str, float]], after: Dict[int, Tuple[str, float]],
+                roles: Dict[str, int]) -> Dict[str, float]:
+    """CPU seconds spent between two :func:`thread_cpu` snapshots, summed by role: the threads named in
+    ``roles`` (role -> thread id: "main", "worker"), the software renderer's ("llvmpipe"), the rest ("other")."""
+    by_id = {tid: role for role, tid in roles.items()}
+    out: Dict[str, float] = {}
+    for tid, (name, sec) in after.items():
+        role = by_id.get(tid) or ("llvmpipe" if name.startswith("llvmpipe") else "other")
+        out[role] = out.get(role, 0.0) + sec - before.get(tid, (name, 0.0))[1]
+    return out
+
+
+FRAME_LOG = ("kind", "side", "requested", "wait", "render", "split", "convert", "resize", "image", "post",
+             "update", "coalesced")
+"""The columns of ``ViewerWindow.stats["frame_log"]``: one row per frame shown (kind 0 preview, 1 a first level,
+2 full size; long side; perf_counter of the request; seconds waiting for the worker, rendering (the library),
+composing a split view, converting to 8 bits, resizing, making the Open3D image, from the worker's end to
+the GUI thread's turn, handing it to the widget; frames replaced in the hand-over slot so far)."""
+
+
 def window(model: str, megapixels: float, tmp: str, max_size: int, repeats: int, threads: int,
            plain: bool = False) -> None:
     """The viewer in its own process on Xvfb, driven with real XTest drags (see the module docstring)."""
@@ -379,8 +419,12 @@ def window(model: str, megapixels: float, tmp: str, max_size: int, repeats: int,
                 lx.XFlush(dpy)
                 return down, time.monotonic()
 
+            cpu = []
             for _ in range(repeats):
-                drags.append((*drag(2), False))
+                before = thread_cpu(proc.pid)
+                first = drag(2)
+                drags.append((*first, False))
+                cpu.append((first[1] - first[0], before, thread_cpu(proc.pid)))  # the first drag's CPU
                 time.sleep(gap_s)  # the first rest's full frame is rendering when the second drag starts
                 drags.append((*drag(-2), True))
                 time.sleep(rest_s)
@@ -429,6 +473,45 @@ def window(model: str, megapixels: float, tmp: str, max_size: int, repeats: int,
           f"worker -> GUI thread hand-over {1000 * med(stats['post_delay']):.0f} ms, request -> shown "
           f"{1000 * med(stats['preview_latency']):.0f} ms; {len(stats['drag_moves'])} mouse moves received "
           f"of {sum(int(drag_s * 60) for _ in drags)} sent")
+    log = [dict(zip(FRAME_LOG, row)) for row in stats.get("frame_log", [])]
+    prev = [r for r in log if r["kind"] == 0]
+    if prev:
+        ms = lambda key: 1000 * float(np.median([r[key] for r in prev]))  # noqa: E731
+        n_prev = len(prev)
+        print(f"  per preview shown ({n_prev} previews, medians, ms): waiting for the worker {ms('wait'):.1f}, "
+              f"render (library) {ms('render'):.1f}, split {ms('split'):.1f}, to 8 bits {ms('convert'):.2f}, "
+              f"resize {ms('resize'):.2f}, Open3D image {ms('image'):.2f}, worker -> GUI thread {ms('post'):.1f}, "
+              f"widget update {ms('update'):.2f}; frames replaced before the GUI thread took them: "
+              f"{log[-1]['coalesced']}")
+    moves = sorted(stats.get("drag_moves", []))
+    firsts = []  # per drag: the first move received, the first frame's request, its wait, render, hand-over, shown
+    for down, up, _ in drags:
+        row = next((r for r in log if r["requested"] > down), None)
+        move = next((t for t in moves if t > down), None)
+        if row is not None and move is not None:
+            done = row["requested"] + row["wait"] + row["render"] + row["split"] + row["convert"] + row["image"]
+            firsts.append([move - down, row["requested"] - down, row["wait"], row["render"], row["post"],
+                           done + row["post"] + row["update"] - down, row["side"]])
+    if firsts:
+        f = np.median(np.array(firsts, np.float64), axis=0)
+        print(f"  mouse-down to first frame, by stage (medians of {len(firsts)} drags, ms): first move received "
+              f"{1000 * f[0]:.0f}, preview requested {1000 * f[1]:.0f}, waiting for the worker {1000 * f[2]:.0f}, "
+              f"render {1000 * f[3]:.0f} ({int(f[6])} px), worker -> GUI thread {1000 * f[4]:.0f}, on screen "
+              f"(widget updated) {1000 * f[5]:.0f}")
+    gap_f, gap = stats.get("tick_gap_frame", []), stats.get("tick_gap", [])
+    if gap_f and gap:
+        print(f"  GUI loop turn after a new frame (its redraw) {1000 * med(gap_f):.0f} ms median "
+              f"(p90 {1000 * np.percentile(gap_f, 90):.0f}), without one {1000 * med(gap):.0f} ms; mouse callback "
+              f"{1000 * med(stats.get('mouse_cb', [])):.2f} ms median")
+    roles = {k: int(v) for k, v in (stats.get("threads") or {}).items()}
+    if cpu and roles:
+        total: Dict[str, float] = {}
+        wall = sum(c[0] for c in cpu)
+        for _, a, b in cpu:
+            for role, sec in cpu_by_role(a, b, roles).items():
+                total[role] = total.get(role, 0.0) + sec
+        print("  CPU while dragging (cores busy, of 2): " + ", ".join(
+            f"{role} {sec / wall:.2f}" for role, sec in sorted(total.items(), key=lambda kv: -kv[1])))
     ticks = np.diff(sorted(stats.get("drag_ticks", [])))
     ticks = ticks[ticks < 1.0]  # within a drag
     if len(ticks):

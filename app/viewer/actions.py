@@ -195,7 +195,7 @@ class PhotoController(Controller):
     def _set_stylize_available(self, available: bool, message: str) -> None:
         w = self.window
         w.state = replace(w.state, stylize_available=available)
-        w.panel.model_label.text = message
+        w.panel.set_line(w.panel.model_label, message)
         w.panel.stylized.enabled = available
 
     def _stylize_ready(self, r: StylizeInfo) -> None:

@@ -162,6 +162,18 @@ def _number(kind, value: float, lo: float, hi: float, decimals: int = 3) -> gui.
     return n
 
 
+LINE_CHAR_EM = 0.46
+"""The width of an average character of Open3D's default font (Roboto), in em: what :func:`fit_line` assumes."""
+
+
+def fit_line(text: str, width_px: float, em: float) -> str:
+    """``text`` cut to what one line ``width_px`` wide holds (characters of :data:`LINE_CHAR_EM` em), with
+    "..." where it was cut: a label that wrapped would push the status area's buttons out of the window."""
+    n = max(8, int(width_px / (LINE_CHAR_EM * em)))
+    t = " ".join(str(text).split())
+    return t if len(t) <= n else t[: n - 3].rstrip() + "..."
+
+
 class Panel:
     """The side panel, status area and help overlay of the viewer window.
 
@@ -338,6 +350,7 @@ class Panel:
         self.progress.value = 0.0
         self.cancel = gui.Button("Cancel")
         self.cancel.enabled = False
+        self.status_text = self.status.text  # the whole message (the label shows one line of it)
         self.status_box.add_child(self.status)
         self.status_box.add_child(self.model_label)
         self.status_box.add_child(self.fps_label)
@@ -371,6 +384,18 @@ class Panel:
 
         img.set_on_mouse(on_mouse)
         self.style_strip.add_child(img)
+
+    def set_line(self, label: gui.Label, text: str) -> None:
+        """Show ``text`` on ``label`` of the status area as one line (:func:`fit_line`); the whole text is its
+        tooltip when cut."""
+        full = str(text)
+        label.text = fit_line(full, (self.WIDTH_EM - 1.5) * self.em, self.em)
+        label.tooltip = full if label.text != full else ""
+
+    def set_status(self, text: str) -> None:
+        """The status line: ``text`` (kept whole in :attr:`status_text`), shown as one line."""
+        self.status_text = str(text)
+        self.set_line(self.status, self.status_text)
 
     def set_enabled(self, photo_loaded: bool) -> None:
         """Enable the controls that need a photo."""

@@ -34,7 +34,7 @@ fraction of the time, then the full one. :meth:`RenderStateMachine.shown` says
 when the next level is due; only the last level settles the view, and a change
 at any level interrupts it. :func:`refine_levels` chooses the levels from the
 last full frame's and the last first level's times: the first level is as large
-(1/4 to 1/2 of the size) as fits the budget of a sharp frame after the rest.
+(1/8 to 1/2 of the size) as fits the budget of a sharp frame after the rest.
 
 ``version`` counts changes; a frame rendered for an older version is out of
 date and never settles the view. Runs on the GUI main thread only (no locks).
@@ -73,7 +73,7 @@ class Change(NamedTuple):
 PROGRESSIVE_LEVELS: Tuple[float, ...] = (0.5, 1.0)
 """The levels of a progressive full frame before anything is measured: half size first, then the full size."""
 
-FIRST_LEVEL_RANGE: Tuple[float, float] = (0.25, 0.5)
+FIRST_LEVEL_RANGE: Tuple[float, float] = (0.125, 0.5)
 """The size fractions the first level of a progressive full frame may take (:func:`refine_levels`)."""
 
 

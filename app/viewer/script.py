@@ -118,7 +118,9 @@ class ScriptRunner:
                     entry.update(ok=True, seconds=0.0)
                     self.results.append(entry)
                     self._write_report()
-                    self.main(self.window.request_close)
+                    # posted, not waited for: a wait that ends while the close has begun (a loaded machine)
+                    # raised "the window is closing" here and made a passing script exit with 1
+                    self.window.post(self.window.request_close)
                     return
                 handler = getattr(self, "op_" + op, None)
                 if handler is None:
@@ -250,7 +252,7 @@ class ScriptRunner:
         dest = self.main(lambda: self.window.exports.start_export(path))
         if wait:
             self._wait_while(lambda: self.window.exports.exporting, timeout, "the export did not finish", 0.1)
-        return {"destination": dest, "status": self.main(lambda: self.window.panel.status.text)}
+        return {"destination": dest, "status": self.main(lambda: self.window.panel.status_text)}
 
     def op_preview_path(self, timeout: float = 120.0) -> Dict[str, Any]:
         """Play the camera path in the view (as the Preview button does) and wait for its end."""
@@ -263,7 +265,7 @@ class ScriptRunner:
     def op_wait_export(self, timeout: float = 300.0) -> Dict[str, Any]:
         """Wait until the running export (if any) ends."""
         self._wait_while(lambda: self.window.exports.exporting, timeout, "the export did not finish", 0.1)
-        return {"status": self.main(lambda: self.window.panel.status.text)}
+        return {"status": self.main(lambda: self.window.panel.status_text)}
 
     def op_ping(self, count: int = 20, interval: float = 0.05) -> Dict[str, Any]:
         """Round trips to the GUI thread (does the window answer while the worker is busy?)."""
@@ -334,7 +336,7 @@ class ScriptRunner:
 
         def status() -> Dict[str, Any]:
             return {"exporting": w.exports.exporting, "dialog_open": w.dialog_open, "closing": w._closing,
-                    "status": w.panel.status.text, "phase": w.scheduler.phase.value,
+                    "status": w.panel.status_text, "phase": w.scheduler.phase.value,
                     "interrupted": w.worker.interrupted, "help_visible": w.panel.help.visible}
 
         return self.main(status)
@@ -354,7 +356,7 @@ class ScriptRunner:
 
         still_open = self.main(type_and_save)
         self.op_wait_worker()
-        return {"dialog_open": still_open, "status": self.main(lambda: w.panel.status.text)}
+        return {"dialog_open": still_open, "status": self.main(lambda: w.panel.status_text)}
 
     def op_app_menu(self, item: Any, fields: Optional[Dict[str, Any]] = None, ok: bool = False,
                     save_as: Optional[str] = None, grab: Optional[str] = None, wait: bool = True,
@@ -398,7 +400,7 @@ class ScriptRunner:
             self.op_wait_worker(timeout)
             self._wait_while(lambda: w.exports.exporting, timeout, "the export did not finish", 0.1)
             self.op_wait_worker(timeout)
-        return {"dialog_open": self.main(lambda: w.dialog_open), "status": self.main(lambda: w.panel.status.text)}
+        return {"dialog_open": self.main(lambda: w.dialog_open), "status": self.main(lambda: w.panel.status_text)}
 
     def op_app_call(self, method: str, wait: bool = True, **kwargs: Any) -> Dict[str, Any]:
         """Call ``window.applications.<method>(**kwargs)`` on the main thread (e.g. ``open_views`` with a
@@ -407,7 +409,7 @@ class ScriptRunner:
         self.main(lambda: getattr(w.applications, method)(**kwargs))
         if wait:
             self.op_wait_worker()
-        return {"dialog_open": self.main(lambda: w.dialog_open), "status": self.main(lambda: w.panel.status.text)}
+        return {"dialog_open": self.main(lambda: w.dialog_open), "status": self.main(lambda: w.panel.status_text)}
 
     def op_open_dialog(self, what: str = "photo", text: Optional[str] = None, close: bool = False) -> None:
         """Open an Open dialog ("photo", "style") as its shortcut does and leave it open (for a screenshot),

@@ -23,7 +23,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, NamedTuple, Optional, Tuple
+from typing import Callable, Dict, NamedTuple, Optional, Tuple
 
 import cv2
 import numpy as np
@@ -34,7 +34,7 @@ from stylize3d_core.geometry.camera import Cameras
 from stylize3d_core.io.images import load_image, to_uint8
 from stylize3d_core.io.video import Progress, write_video
 from stylize3d_core.pipeline import EXPORT_POINTS_PER_PIXEL, PhotoSpec, load_photo3d
-from stylize3d_core.render.plain import PlainRenderer, PlainRenderSettings
+from stylize3d_core.render.plain import PlainRenderer, PlainRenderSettings, frame_size
 from stylize3d_core.scene.photo3d import Photo3D
 
 from .layers import ViewerLayers
@@ -62,7 +62,8 @@ class ViewFrame(NamedTuple):
     """A rendered view ready for display.
 
     Attributes:
-        image: (Hd, Wd, 3) uint8, resized to the display size.
+        image: (Hd, Wd, 3) uint8: the rendered size, or the display size it was resized to
+            (:meth:`ViewerSession.render_view`'s ``display_hw``).
         rendered_size: (H, W) it was rendered at.
         stylized: True if it came through the model.
         preview: True for a reduced-resolution preview.
@@ -103,6 +104,15 @@ def colour_jump(before: np.ndarray, after: np.ndarray) -> Tuple[float, float]:
         raise InputError("colour jump", f"image shapes differ: {before.shape} and {after.shape}")
     a, b = before.astype(np.float32), after.astype(np.float32)
     return float(np.abs(a.mean((0, 1)) - b.mean((0, 1))).mean()), float(np.abs(a - b).mean())
+
+
+def shown_as(image: np.ndarray, shape: Tuple[int, ...]) -> np.ndarray:
+    """``image`` (H, W, 3) uint8 scaled (bilinear) to ``shape``'s (H, W), as the view shows a smaller frame
+    in the place of a larger one (for comparing a preview with the full frame that replaces it)."""
+    h, w = int(shape[0]), int(shape[1])
+    if image.shape[:2] == (h, w):
+        return image
+    return cv2.resize(image, (w, h), interpolation=cv2.INTER_LINEAR)
 
 
 def split_view(before: np.ndarray, after: np.ndarray, fraction: float) -> np.ndarray:
@@ -276,27 +286,58 @@ class ViewerSession:
             raise RenderInterrupted("render stopped before rasterizing")
         return self._plain.render(camera, height, width, preview=preview, should_stop=should_stop)
 
-    def render_view(self, camera: Cameras, size: Tuple[int, int], display_hw: Tuple[int, int], *,
+    def render_view(self, camera: Cameras, size: Tuple[int, int], display_hw: Optional[Tuple[int, int]] = None, *,
                     preview: bool, stylized: bool, should_stop: Optional[Callable[[], bool]] = None,
-                    split: Optional[float] = None, calibrate: bool = True) -> ViewFrame:
-        """Render at ``size`` (H, W) and convert for display at ``display_hw`` (``should_stop``: see :meth:`render`).
+                    split: Optional[float] = None, calibrate: bool = True,
+                    timings: Optional[Dict[str, float]] = None) -> ViewFrame:
+        """Render at ``size`` (H, W) and convert to 8 bits for display (``should_stop``: see :meth:`render`);
+        resized (bilinear) to ``display_hw`` when given, else kept at ``size`` (the window's image widget
+        scales it to the view smoothly on the GPU: no full-view upscale in Python).
 
         ``split`` in [0, 1] (stylized views only): a before / after comparison, the original 3D photo
         left of that fraction of the width and the stylized view right of it (see :func:`split_view`).
         A stylized full frame re-matches the previews' colours to itself (:meth:`calibrate_previews`)
-        unless ``calibrate`` is False (an intermediate level of a progressive frame: the final one will)."""
-        rgb = self.render(camera, size[0], size[1], preview=preview, stylized=stylized, should_stop=should_stop)
-        if stylized and self.can_stylize:
+        unless ``calibrate`` is False (an intermediate level of a progressive frame: the final one will).
+        The original 3D photo's full frames are rendered at most at the photo's own size and scaled up
+        (:meth:`render_original`). ``timings``, when given, receives the seconds of each stage
+        (``render``, ``split``, ``convert``, ``resize``)."""
+        t0 = time.perf_counter()
+        styled = stylized and self.can_stylize
+        if styled:
+            rgb = self.render(camera, size[0], size[1], preview=preview, stylized=True, should_stop=should_stop)
             if preview:
                 self._preview_hw = (int(size[0]), int(size[1]))
                 if self.colour_gain is not None:
                     rgb = np.clip(rgb * self.colour_gain, 0.0, 1.0)
             elif calibrate:
                 self.calibrate_previews(camera, rgb)
-        if split is not None and stylized and self.can_stylize:
-            before = self.render(camera, size[0], size[1], preview=preview, stylized=False)
-            rgb = split_view(before, rgb, split)
-        return ViewFrame(display_image(rgb, display_hw), tuple(size), stylized and self.can_stylize, preview)
+        else:
+            rgb = self.render_original(camera, size, preview=preview, should_stop=should_stop)
+        t1 = time.perf_counter()
+        if split is not None and styled:
+            rgb = split_view(self.render_original(camera, size, preview=preview), rgb, split)
+        t2 = time.perf_counter()
+        u8 = to_uint8(np.nan_to_num(np.asarray(rgb, dtype=np.float32), nan=0.0, posinf=1.0, neginf=0.0))
+        t3 = time.perf_counter()
+        if display_hw is not None and u8.shape[:2] != tuple(display_hw):
+            u8 = cv2.resize(u8, (int(display_hw[1]), int(display_hw[0])), interpolation=cv2.INTER_LINEAR)
+        u8 = np.ascontiguousarray(u8)
+        if timings is not None:
+            timings.update(render=t1 - t0, split=t2 - t1, convert=t3 - t2, resize=time.perf_counter() - t3)
+        return ViewFrame(u8, tuple(size), styled, preview)
+
+    def render_original(self, camera: Cameras, size: Tuple[int, int], *, preview: bool,
+                        should_stop: Optional[Callable[[], bool]] = None) -> np.ndarray:
+        """The original (plain) 3D photo for the view, (H, W, 3) float32: a full frame larger than the photo
+        is rendered at the photo's size and scaled up (bilinear), since past one point per pixel the
+        splats' seams show as a faint dot grid that the scaling does not have."""
+        h, w = int(size[0]), int(size[1])
+        cap = max(self.photo.size) if self.photo is not None else max(h, w)
+        if preview or max(h, w) <= cap:
+            return self.render(camera, h, w, preview=preview, stylized=False, should_stop=should_stop)
+        small = frame_size(tuple(self.photo.size), int(cap), even=False)
+        rgb = self.render(camera, small[0], small[1], preview=False, stylized=False, should_stop=should_stop)
+        return cv2.resize(np.ascontiguousarray(rgb, dtype=np.float32), (w, h), interpolation=cv2.INTER_LINEAR)
 
     def calibrate_previews(self, camera: Cameras, full: np.ndarray) -> Optional[np.ndarray]:
         """Match the colours of stylized previews to the full frame ``full`` of ``camera``: the decoder

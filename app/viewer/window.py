@@ -47,7 +47,7 @@ from . import panel as P
 from .actions import CameraPathController, ExportController, PhotoController, ui_callback
 from .applications import ApplicationsController
 from .orbit import HOME, OrbitLimits, apply_drag, apply_wheel, orbit
-from .session import NO_MODEL, ViewerSession, ViewFrame, colour_jump
+from .session import NO_MODEL, ViewerSession, ViewFrame, colour_jump, shown_as
 from .render_state import RenderPhase, RenderStateMachine, refine_levels
 from .state import (
     PREVIEW_SAMPLES, VIEWER_MAX_SIZE, PreviewSettings, ViewState, choose_preview_long_side, clamp_state_pose,
@@ -121,7 +121,8 @@ class ViewerWindow:
                                       "preview_latency": [], "post_delay": [], "mouse_down": [],
                                       "drag_moves": [], "full_shown": [], "level_seconds": [], "level_shown": [],
                                       "colour_jump": [], "preview_sides": [], "level_sizes": [], "full_sizes": [],
-                                      "interrupted": [], "drag_ticks": []}
+                                      "interrupted": [], "drag_ticks": [], "frame_log": [], "mouse_cb": [],
+                                      "tick_gap_frame": [], "tick_gap": [], "threads": {}}
         self.script_thread: Optional[threading.Thread] = None
         self._preview_side = self.preview.preview_long_side
         self._last_level: Optional[Tuple[float, float]] = None  # (scale, seconds) of the last first level
@@ -130,6 +131,13 @@ class ViewerWindow:
         self._shown_generation = 0
         self._shown: Optional[ViewFrame] = None
         self._requested_at: Dict[int, float] = {}
+        self._frame_lock = threading.Lock()
+        self._pending_frame: Optional[Tuple[RenderResult, int, float]] = None  # the newest frame not yet shown
+        self._coalesced = 0  # frames replaced in that slot before the GUI thread took them
+        self._last_tick: Optional[float] = None
+        self._frame_mark: Optional[float] = None  # perf_counter when the last frame went to the widget
+        self._label_at = -1.0  # monotonic time of the last statistics-label update
+        self._first_preview = True  # no preview of the current movement on screen yet (view_changed)
         self._drag: Optional[List[Any]] = None  # [mode, last x, last y]
         self._last_click = (-1.0, 0, 0)
         self._ctrl_down = False
@@ -147,6 +155,7 @@ class ViewerWindow:
             print(f"stylize3d-viewer: {loaded.warning}", file=sys.stderr)
             self.set_status(loaded.warning)
         self.worker.start()
+        self.stats["threads"] = {"main": threading.get_native_id(), "worker": self.worker.thread.native_id}
         if options.style:
             self.photos.open_style(options.style)
         if options.spec.photo:
@@ -264,8 +273,11 @@ class ViewerWindow:
     @property
     def full_render_budget_s(self) -> float:
         """What a full-quality frame (or the first level of one) may take: the budget from rest to a sharp
-        frame (``PreviewSettings.full_budget_s``) less the rest delay that comes before it."""
-        return max(0.05, self.preview.full_budget_s - self.preview.rest_delay_s)
+        frame (``PreviewSettings.full_budget_s``) less the rest delay that comes before it and the preview
+        it may have to wait for (the median of the recent previews' times)."""
+        waits = [sec for _, sec in self._preview_times]
+        preview_s = float(np.median(waits)) if waits else 0.0
+        return max(0.05, self.preview.full_budget_s - self.preview.rest_delay_s - preview_s)
 
     @property
     def display_hw(self) -> Tuple[int, int]:
@@ -360,8 +372,8 @@ class ViewerWindow:
         message = str(error) if isinstance(error, InputError) else f"{type(error).__name__}: {error}"
         self.errors.append(f"{what}: {message}")
         if self._status_before_error is None:
-            self._status_before_error = self.panel.status.text
-        self.panel.status.text = f"Error ({what})"
+            self._status_before_error = self.panel.status_text
+        self.panel.set_status(f"Error ({what})")
         self.show_message("stylize3d: " + what, message, [("OK", then)])
 
     def show_message(self, title: str, message: str, buttons=None) -> None:
@@ -387,7 +399,7 @@ class ViewerWindow:
         self._dialog_open = False
         self.window.close_dialog()
         if self._status_before_error is not None:
-            self.panel.status.text = self._status_before_error
+            self.panel.set_status(self._status_before_error)
             self._status_before_error = None
 
     @property
@@ -396,12 +408,12 @@ class ViewerWindow:
 
     def set_status(self, text: str) -> None:
         """Show ``text`` in the status line."""
-        self.panel.status.text = text
+        self.panel.set_status(text)
 
     def set_busy(self, text: Optional[str], fraction: Optional[float] = None) -> None:
         """Show ``text`` (if not None) in the status line and ``fraction`` (None: none) on the progress bar."""
         if text is not None:
-            self.panel.status.text = text
+            self.panel.set_status(text)
         self.panel.progress.value = 0.0 if fraction is None else float(min(1.0, max(0.0, fraction)))
 
     def file_dialog(self, mode, title: str, filters, on_done: Callable[[str], None], default_name: str = "",
@@ -481,17 +493,24 @@ class ViewerWindow:
     # -- view changes and rendering -----------------------------------------------------
     def view_changed(self) -> None:
         """The view changed: ask for a preview now (interrupting a full render in progress); the tick asks
-        for the full frame once it rests (:class:`~app.viewer.render_state.RenderStateMachine`)."""
+        for the full frame once it rests (:class:`~app.viewer.render_state.RenderStateMachine`). The first
+        preview after a rest is the smallest (``min_preview_long_side``), and so is every one requested
+        before a preview of this movement is on screen (a newer request replaces a waiting one): it is what
+        a new drag waits for."""
+        if self.scheduler.phase is not RenderPhase.MOVING:
+            self._first_preview = True
         change = self.scheduler.changed(time.monotonic())
         if change.interrupt:
             self.worker.interrupt_render()
-        self.request_render(preview=True)
+        self.request_render(preview=True, side=self.preview.min_preview_long_side if self._first_preview else None)
 
-    def request_render(self, preview: bool, camera=None) -> None:
-        """Ask the worker for a frame of the view (or of ``camera``): a preview or the full frame.
+    def request_render(self, preview: bool, camera=None, side: Optional[int] = None) -> None:
+        """Ask the worker for a frame of the view (or of ``camera``): a preview (of long side ``side``, else
+        the adaptive size) or the full frame.
 
         The view's full frame carries a cancel event: any newer request stops it between stages (a
-        full-quality frame of a ``camera`` -- the keyframe preview -- does not)."""
+        full-quality frame of a ``camera`` -- the keyframe preview -- does not). Frames are rendered at
+        their own size; the image widget scales them to the view."""
         info = self.state.photo_info
         if info is None or self._display_hw == (0, 0):
             return
@@ -499,7 +518,7 @@ class ViewerWindow:
         display = self._display_hw
         scale = 1.0 if preview or camera is not None else self.scheduler.full_scale
         if preview:
-            size = frame_size(info.size, min(self._preview_side, max(display)))
+            size = frame_size(info.size, min(side or self._preview_side, max(display)))
         elif scale < 1.0:  # a progressive level: the full quality at a fraction of the size
             size = frame_size(info.size, max(32, int(round(scale * max(display)))))
         else:
@@ -510,33 +529,62 @@ class ViewerWindow:
         session = self.session
         cancel = None if preview or camera is not None else threading.Event()
         stop = None if cancel is None else cancel.is_set
+        requested = time.perf_counter()
 
-        def render() -> Tuple[ViewFrame, o3d.geometry.Image]:  # (on the worker: the GUI thread only shows it)
-            frame = session.render_view(cam, size, display, preview=preview, stylized=stylized, should_stop=stop,
-                                        split=split, calibrate=scale >= 1.0)
-            return frame, o3d.geometry.Image(frame.image)
+        def render() -> Tuple[ViewFrame, o3d.geometry.Image, Dict[str, float]]:  # (on the worker)
+            started = time.perf_counter()
+            times: Dict[str, float] = {"requested": requested, "wait": started - requested}
+            frame = session.render_view(cam, size, None, preview=preview, stylized=stylized, should_stop=stop,
+                                        split=split, calibrate=scale >= 1.0, timings=times)
+            t = time.perf_counter()
+            image = o3d.geometry.Image(frame.image)  # the GUI thread only hands it to the widget
+            times["image"] = time.perf_counter() - t
+            return frame, image, times
 
         def interrupted() -> None:
             self._post(lambda: self.scheduler.full_interrupted(version))
 
         gen = self.worker.request_render(
-            render, lambda res: self._post(lambda: self._on_frame(res, version, scale)), preview=preview,
+            render, lambda res: self._deliver(res, version, scale), preview=preview,
             on_error=lambda name, e: self._post(lambda: self._on_render_failed(name, e, version, preview)),
             cancel=cancel, on_interrupted=None if cancel is None else interrupted)
-        self._requested_at[gen] = time.perf_counter()
+        self._requested_at[gen] = requested
         if not preview and camera is None:
             self.scheduler.full_requested()
+
+    def _deliver(self, res: RenderResult, version: int, scale: float) -> None:
+        """Worker thread: a finished frame goes into the one-frame slot; the GUI thread is woken only when the
+        slot was empty (a frame that arrives while the last one waits for the GUI thread replaces it: one
+        hand-over and one redraw per GUI turn, never a queue of stale frames)."""
+        with self._frame_lock:
+            waiting = self._pending_frame is not None
+            if waiting:
+                self._coalesced += 1
+            self._pending_frame = (res, version, scale)
+        if not waiting:
+            self._post(self._show_pending)
+
+    def _show_pending(self) -> None:
+        """GUI thread: show the frame waiting in the slot, if any (posted by :meth:`_deliver`; a mouse drag
+        calls it too)."""
+        with self._frame_lock:
+            pending, self._pending_frame = self._pending_frame, None
+        if pending is not None:
+            self._on_frame(*pending)
 
     def _on_frame(self, res: RenderResult, version: int, scale: float = 1.0) -> None:
         if res.generation <= self._shown_generation:
             return
         self._shown_generation = res.generation
-        frame, image = res.value  # (ViewFrame, its Open3D image made on the worker)
+        t_main = time.perf_counter()
+        frame, image, times = res.value  # (ViewFrame, its Open3D image made on the worker, stage seconds)
         self.image.update_image(image)
         self.window.post_redraw()
-        if not res.preview and self._shown is not None and self._shown.preview and \
-                self._shown.image.shape == frame.image.shape:  # what the user sees change on release
-            self.stats["colour_jump"].append([scale, *colour_jump(self._shown.image, frame.image)])
+        t_update = time.perf_counter()
+        self._frame_mark = t_update
+        if not res.preview and self._shown is not None and self._shown.preview:  # what the user sees change
+            self.stats["colour_jump"].append([scale, *colour_jump(shown_as(self._shown.image, frame.image.shape),
+                                                                  frame.image)])
         self._shown = frame
         next_level = self.scheduler.shown(version, res.preview, scale)
         self.paths.frame_shown()
@@ -548,7 +596,12 @@ class ViewerWindow:
             del self._requested_at[g]
         st = self.stats
         st["post_delay"].append(now - res.finished)
+        kind = 0 if res.preview else (1 if scale < 1.0 else 2)
+        st["frame_log"].append([kind, max(frame.rendered_size), times["requested"], times["wait"], times["render"],
+                                times["split"], times["convert"], times["resize"], times["image"], t_main - res.finished,
+                                t_update - t_main, self._coalesced])
         if res.preview:
+            self._first_preview = False
             st["preview_latency"].append(latency)
             st["preview_seconds"].append(res.seconds)
             st["preview_shown"].append(time.monotonic())
@@ -570,19 +623,21 @@ class ViewerWindow:
         for value in st.values():
             if isinstance(value, list):
                 del value[:-2000]
-        self._update_fps_label()
+        if not res.preview or time.monotonic() - self._label_at > 0.5:  # text changes cost a relayout: ~2 Hz
+            self._label_at = time.monotonic()
+            self._update_fps_label()
 
     def _update_fps_label(self) -> None:
         st = self.stats
         text = ""
         if st["preview_seconds"]:
             ms = 1000.0 * float(np.median(st["preview_seconds"][-10:]))
-            text = f"preview {ms:.0f} ms @ {self._preview_side} px"
+            text = f"preview {self._preview_side}px {ms:.0f}ms"
         if st["level_seconds"] and st["level_sizes"] and self.scheduler.levels != (1.0,):
-            text += f"; {max(st['level_sizes'][-1])} px {st['level_seconds'][-1]:.2f} s"
+            text += f"; {max(st['level_sizes'][-1])}px {st['level_seconds'][-1]:.2f}s"
         if st["full_seconds"]:
-            text += f"; full {st['full_seconds'][-1]:.2f} s"
-        self.panel.fps_label.text = text
+            text += f"; full {st['full_seconds'][-1]:.1f}s"
+        self.panel.set_line(self.panel.fps_label, text)
 
     def _on_render_failed(self, name: str, e: BaseException, version: int, preview: bool) -> None:
         self.paths.frame_shown()
@@ -597,6 +652,12 @@ class ViewerWindow:
         now = time.monotonic()
         if self._drag is not None:  # the GUI loop's rate while dragging (the bench reports it)
             self.stats["drag_ticks"].append(now)
+            t = time.perf_counter()  # the GUI loop's turn after a frame (its redraw) and without one
+            if self._frame_mark is not None:
+                self.stats["tick_gap_frame"].append(t - self._frame_mark)
+            elif self._last_tick is not None:
+                self.stats["tick_gap"].append(t - self._last_tick)
+        self._frame_mark = None
         if self._close_pending is not None and now - self._close_pending >= CLOSE_GRACE_S:
             self._close_pending = None  # no Esc followed: the user closed the window
             self.quit()
@@ -604,11 +665,20 @@ class ViewerWindow:
             self.paths.step(now)
         elif self.state.photo_info is not None and self.scheduler.full_due(now, holding=self._drag is not None):
             self.request_render(preview=False)
+        self._last_tick = time.perf_counter()
         return False
 
     # -- camera control ---------------------------------------------------------------
     @ui_callback
     def _on_mouse(self, e: gui.MouseEvent) -> int:
+        t0 = time.perf_counter()
+        try:
+            return self._mouse(e)
+        finally:
+            if self._drag is not None:
+                self.stats["mouse_cb"].append(time.perf_counter() - t0)
+
+    def _mouse(self, e: gui.MouseEvent) -> int:
         T = gui.MouseEvent.Type
         if self.state.photo_info is None:
             return gui.Widget.EventCallbackResult.IGNORED
@@ -632,13 +702,16 @@ class ViewerWindow:
             self._drag[1:] = [e.x, e.y]
             self.stats["drag_moves"].append(time.monotonic())
             self.drag(mode, e.x - x0, e.y - y0)
+            # Open3D handles every queued mouse event (each one redraws the window) before it runs posted
+            # functions: on a loaded machine a drag's events keep it busy and the posted frames waited until
+            # the mouse stopped (a second drag showed 1 frame in 1.7 s). The drag takes the newest frame itself.
+            self._show_pending()
             return gui.Widget.EventCallbackResult.CONSUMED
         if e.type == T.BUTTON_UP:
             self._drag = None
-            if self.scheduler.phase is RenderPhase.MOVING and self.state.playback is None and \
-                    not self.worker.render_waiting():  # the release is the rest: the full frame now (not
-                self.request_render(preview=False)  # when the final pose's preview still waits: it goes first)
-            return gui.Widget.EventCallbackResult.CONSUMED
+            if self.scheduler.phase is RenderPhase.MOVING and self.state.playback is None:
+                self.request_render(preview=False)  # the release is the rest: the full-quality frame now (it
+            return gui.Widget.EventCallbackResult.CONSUMED  # replaces a waiting preview of the same pose)
         if e.type == T.WHEEL:
             self.wheel(wheel_ticks(e.wheel_dy, self.options.invert_wheel))
             return gui.Widget.EventCallbackResult.CONSUMED

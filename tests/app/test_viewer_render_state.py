@@ -96,7 +96,7 @@ def test_refine_levels_and_bad_levels():
     assert refine_levels(2.0, 0.5) == (0.5, 1.0)
     assert refine_levels(0.3, 0.5) == (1.0,)
     assert refine_levels(float("nan")) == (0.5, 1.0)
-    assert refine_levels(8.0, 0.5) == (0.25, 1.0)  # only the full frame known: ~ pixels; none fits: the smallest
+    assert refine_levels(8.0, 0.5) == (0.25, 1.0)  # only the full frame known: ~ pixels; 8 s / 16 fits
     for bad in ((), (0.5,), (1.0, 0.5, 1.0), (0.0, 1.0), (0.5, 0.5, 1.0)):
         with pytest.raises(InputError):
             RenderStateMachine(levels=bad)
@@ -106,9 +106,10 @@ def test_first_level_fits_the_budget_from_measured_times():
     # full frame 2.0 s, a half-size level 0.8 s: 0.4 s fixed (every point rasterized) + 1.6 s * scale^2
     a, b = level_cost_model((1.0, 2.0), (0.5, 0.8))
     assert a == pytest.approx(0.4) and b == pytest.approx(1.6)
-    assert refine_levels(2.0, 0.5, (0.5, 0.8)) == (0.25, 1.0)  # 0.4 + 1.6 / 16 = 0.5
+    assert refine_levels(2.0, 0.501, (0.5, 0.8)) == (0.25, 1.0)  # 0.4 + 1.6 / 16 = 0.5
+    assert refine_levels(2.0, 0.49, (0.5, 0.8)) == (3 / 16, 1.0)  # 0.4 + 1.6 * 9 / 256 = 0.456
     assert refine_levels(2.0, 0.6, (0.5, 0.8)) == (5 / 16, 1.0)  # 6/16 would take 0.625 s
-    assert refine_levels(2.0, 0.3, (0.5, 0.8)) == (0.25, 1.0)  # none fits: the smallest level
+    assert refine_levels(2.0, 0.3, (0.5, 0.8)) == (0.125, 1.0)  # none fits: the smallest level
     assert refine_levels(0.9, 1.0, (0.5, 0.8)) == (1.0,)  # the full frame fits: one level
     assert refine_levels(1.2, 1.0, (0.25, 0.3)) == (0.5, 1.0)  # a cheap level: up to half size
     # unusable fits (a level slower than the full frame, equal scales): the pixel-count model

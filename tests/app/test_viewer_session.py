@@ -242,3 +242,40 @@ def test_colour_jump_known_values():
     assert colour_jump(np.full((4, 6, 3), 25, np.uint8), after) == pytest.approx((0.0, 25.0))
     with pytest.raises(InputError, match="shapes differ"):
         colour_jump(before, np.zeros((4, 5, 3), np.uint8))
+
+
+def test_view_frames_keep_their_size_and_report_stage_times(plain):
+    cam = pose_camera(OrbitPose(yaw_deg=3.0), plain.info.scene, plain.info.fov_y_deg)
+    times = {}
+    f = plain.render_view(cam, (32, 48), None, preview=True, stylized=False, timings=times)
+    assert f.image.shape == (32, 48, 3) and f.image.dtype == np.uint8 and f.rendered_size == (32, 48)
+    assert set(times) == {"render", "split", "convert", "resize"} and all(v >= 0 for v in times.values())
+    big = plain.render_view(cam, (32, 48), (64, 96), preview=True, stylized=False)
+    assert big.image.shape == (64, 96, 3)
+
+
+def test_the_original_above_the_photos_size_is_rendered_at_it_and_scaled_up(plain):
+    """Past one point per pixel the plain splats' seams show as a faint dot grid; the view renders the
+    original at the photo's size and scales it up instead."""
+    import cv2
+
+    cam = pose_camera(OrbitPose(yaw_deg=3.0), plain.info.scene, plain.info.fov_y_deg)
+    h, w = plain.info.size
+    big = (2 * h, 2 * w)
+    up = plain.render_original(cam, big, preview=False)
+    native = plain.render(cam, h, w, preview=False, stylized=False)
+    assert up.shape == (*big, 3) and np.isfinite(up).all()
+    np.testing.assert_allclose(up, cv2.resize(native, (2 * w, 2 * h), interpolation=cv2.INTER_LINEAR), atol=1e-6)
+    small = frame_size(plain.info.size, 64)  # at or below the photo's size: rendered as asked
+    np.testing.assert_array_equal(plain.render_original(cam, small, preview=False),
+                                  plain.render(cam, *small, preview=False, stylized=False))
+
+
+def test_shown_as_scales_a_preview_to_the_full_frame():
+    from app.viewer.session import shown_as
+
+    small = np.zeros((2, 3, 3), np.uint8)
+    small[:, :] = [10, 200, 40]
+    out = shown_as(small, (8, 12, 3))
+    assert out.shape == (8, 12, 3) and (out == [10, 200, 40]).all()
+    assert shown_as(small, small.shape) is small

@@ -251,3 +251,16 @@ def test_typed_paths_in_open_dialogs_must_name_an_existing_file(tmp_path, monkey
         resolve_open_path(str(tmp_path / "photos") + "/", None)
     with pytest.raises(InputError, match="type a file name"):
         resolve_open_path("   ", None)
+
+
+def test_status_lines_fit_one_line():
+    from app.viewer.panel import LINE_CHAR_EM, fit_line
+
+    em = 16.0
+    width = 40 * LINE_CHAR_EM * em  # 40 characters
+    assert fit_line("Ready (point cloud encoded in 4.2 s)", width, em) == "Ready (point cloud encoded in 4.2 s)"
+    long = "3D photo ready in 12.3 s (depth: depth prior, built-in, narrowed range)"
+    cut = fit_line(long, width, em)
+    assert len(cut) == 40 and cut.endswith("...") and long.startswith(cut[:-3])
+    assert fit_line("two\nlines", width, em) == "two lines"  # a newline would wrap it too
+    assert len(fit_line(long, 1.0, em)) == 8  # never less than a few characters
