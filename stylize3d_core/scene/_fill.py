@@ -201,12 +201,15 @@ class LinearFit(NamedTuple):
         centre: (H, W, 2) float64 weighted mean position (x = column, y = row) of those sources.
         grad: (H, W, C, 2) float64 gradient (d/dx, d/dy) of the fit.
         support: (H, W) float64 blurred weight (0 where no source is near).
+        trust: (H, W, C) float64 in [0, 1], how far the plane explains the values near each
+            pixel (1 where the channel is not damped; see :func:`local_linear_fit`).
     """
 
     mean: np.ndarray
     centre: np.ndarray
     grad: np.ndarray
     support: np.ndarray
+    trust: Optional[np.ndarray] = None
 
 
 def local_linear_fit(
@@ -260,18 +263,41 @@ def local_linear_fit(
     gx = (d * cvx - b * cvy) / det
     gy = (a * cvy - b * cvx) / det
     damped = np.broadcast_to(np.asarray(damp, bool), (c,))
+    keep = np.ones_like(gx)
     if damped.any():  # keep the gradient where the plane explains the local variance, drop it on noise
         var = g(wv * v) * inv[..., None] - mv * mv  # (H, W, C)
         r2 = (gx * cvx + gy * cvy) / np.maximum(var, 1e-12)  # R^2 of the (ridge-shrunk) fit
         keep = np.clip((r2 - _R2_NOISE) / (_R2_SMOOTH - _R2_NOISE), 0.0, 1.0)
         keep[..., ~damped] = 1.0
         gx, gy = gx * keep, gy * keep
-    return LinearFit(mv, np.stack([mx + w / 2.0, my + h / 2.0], axis=-1), np.stack([gx, gy], axis=-1), s0)
+    return LinearFit(mv, np.stack([mx + w / 2.0, my + h / 2.0], axis=-1), np.stack([gx, gy], axis=-1), s0, keep)
 
 
 def split_fit(fit: LinearFit, channels: slice) -> LinearFit:
     """The fit of some of its channels (the positions and support are shared)."""
-    return LinearFit(fit.mean[..., channels], fit.centre, fit.grad[..., channels, :], fit.support)
+    trust = fit.trust[..., channels] if fit.trust is not None else None
+    return LinearFit(fit.mean[..., channels], fit.centre, fit.grad[..., channels, :], fit.support, trust)
+
+
+def anchored(fit: LinearFit, values: np.ndarray) -> LinearFit:
+    """The fit re-centred on every pixel's own value, as far as the plane explains its neighbourhood.
+
+    A continuation from source ``q`` then starts at ``fit(q) + trust(q) (v(q) - fit(q))``: the
+    pixel's own value where the local plane explains the values (smooth shading, a plane's
+    disparity: the window mean of a curved signal is biased by its curvature, e.g. a receding
+    ground's fast-changing rows), the fit's value on noise-like texture (no speckle copied).
+
+    Args:
+        fit: a :func:`local_linear_fit` of ``values``.
+        values: (H, W, C) the fitted values.
+    """
+    h, w = values.shape[:2]
+    y, x = np.mgrid[:h, :w].astype(np.float64)
+    at_q = fit.mean + fit.grad[..., 0] * (x - fit.centre[..., 0])[..., None] + fit.grad[..., 1] * (
+        y - fit.centre[..., 1])[..., None]
+    trust = fit.trust if fit.trust is not None else 1.0
+    anchor = at_q + trust * (values.astype(np.float64) - at_q)
+    return LinearFit(anchor, np.stack([x, y], axis=-1), fit.grad, fit.support, fit.trust)
 
 
 def extrapolate(
