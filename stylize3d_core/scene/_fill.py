@@ -214,7 +214,7 @@ class LinearFit(NamedTuple):
 
 def local_linear_fit(
     values: np.ndarray, weight: np.ndarray, sigma: float, ridge: Union[float, Sequence[float]] = 0.02,
-    damp: Union[bool, Sequence[bool]] = False,
+    damp: Union[bool, Sequence[bool]] = False, where: Optional[np.ndarray] = None,
 ) -> LinearFit:
     """Moving least squares: at every pixel, the plane fitted to the weighted values around it.
 
@@ -235,6 +235,8 @@ def local_linear_fit(
         damp: (one, or one per channel) scale the gradient by the fit's R^2 (the share of the values' local variance
             the plane explains), from 0 at ``_R2_NOISE`` to 1 at ``_R2_SMOOTH``: noise-like
             texture gets no gradient, smooth shading keeps it.
+        where: (H, W) bool, the pixels whose fit is wanted (all by default): the moments are
+            blurred over the whole image, the fit is solved there only (0 elsewhere).
     """
     h, w = weight.shape
     wt = weight.astype(np.float32)
@@ -242,9 +244,10 @@ def local_linear_fit(
     y, x = np.mgrid[:h, :w].astype(np.float32)
     x -= w / 2.0
     y -= h / 2.0
+    idx = np.nonzero(where) if where is not None else (slice(None), slice(None))
 
-    def g(a: np.ndarray) -> np.ndarray:
-        return _as3(cv2.GaussianBlur(a, (0, 0), sigma, borderType=cv2.BORDER_CONSTANT))
+    def g(a: np.ndarray) -> np.ndarray:  # blurred over the whole image, kept where asked
+        return _as3(cv2.GaussianBlur(a, (0, 0), sigma, borderType=cv2.BORDER_CONSTANT))[idx]
 
     s0 = g(wt)[..., 0]
     inv = 1.0 / np.maximum(s0, 1e-12)
@@ -253,7 +256,7 @@ def local_linear_fit(
     cxy = g(wt * x * y)[..., 0] * inv - mx * my
     cyy = g(wt * y * y)[..., 0] * inv - my * my
     wv = v * wt[..., None]
-    mv = g(wv) * inv[..., None]  # (H, W, C)
+    mv = g(wv) * inv[..., None]  # (H, W, C), or (N, C) where asked
     cvx = g(wv * x[..., None]) * inv[..., None] - mv * mx[..., None]
     cvy = g(wv * y[..., None]) * inv[..., None] - mv * my[..., None]
     c = v.shape[-1]
@@ -270,7 +273,15 @@ def local_linear_fit(
         keep = np.clip((r2 - _R2_NOISE) / (_R2_SMOOTH - _R2_NOISE), 0.0, 1.0)
         keep[..., ~damped] = 1.0
         gx, gy = gx * keep, gy * keep
-    return LinearFit(mv, np.stack([mx + w / 2.0, my + h / 2.0], axis=-1), np.stack([gx, gy], axis=-1), s0, keep)
+    fields = (mv, np.stack([mx + w / 2.0, my + h / 2.0], axis=-1), np.stack([gx, gy], axis=-1), s0, keep)
+    if where is None:
+        return LinearFit(*fields)
+    full = []
+    for f in fields:
+        out = np.zeros((h, w) + f.shape[1:], f.dtype)
+        out[idx] = f
+        full.append(out)
+    return LinearFit(*full)
 
 
 def split_fit(fit: LinearFit, channels: slice) -> LinearFit:
@@ -279,7 +290,7 @@ def split_fit(fit: LinearFit, channels: slice) -> LinearFit:
     return LinearFit(fit.mean[..., channels], fit.centre, fit.grad[..., channels, :], fit.support, trust)
 
 
-def anchored(fit: LinearFit, values: np.ndarray) -> LinearFit:
+def anchored(fit: LinearFit, values: np.ndarray, where: Optional[np.ndarray] = None) -> LinearFit:
     """The fit re-centred on every pixel's own value, as far as the plane explains its neighbourhood.
 
     A continuation from source ``q`` then starts at ``fit(q) + trust(q) (v(q) - fit(q))``: the
@@ -290,14 +301,21 @@ def anchored(fit: LinearFit, values: np.ndarray) -> LinearFit:
     Args:
         fit: a :func:`local_linear_fit` of ``values``.
         values: (H, W, C) the fitted values.
+        where: (H, W) bool, the pixels to re-centre (all by default; 0 elsewhere).
     """
     h, w = values.shape[:2]
+    idx = np.nonzero(where) if where is not None else (slice(None), slice(None))
     y, x = np.mgrid[:h, :w].astype(np.float64)
-    at_q = fit.mean + fit.grad[..., 0] * (x - fit.centre[..., 0])[..., None] + fit.grad[..., 1] * (
-        y - fit.centre[..., 1])[..., None]
-    trust = fit.trust if fit.trust is not None else 1.0
-    anchor = at_q + trust * (values.astype(np.float64) - at_q)
-    return LinearFit(anchor, np.stack([x, y], axis=-1), fit.grad, fit.support, fit.trust)
+    y, x = y[idx], x[idx]
+    mean, centre, grad = fit.mean[idx], fit.centre[idx], fit.grad[idx]
+    at_q = mean + grad[..., 0] * (x - centre[..., 0])[..., None] + grad[..., 1] * (y - centre[..., 1])[..., None]
+    trust = fit.trust[idx] if fit.trust is not None else 1.0
+    anchor_q = at_q + trust * (values[idx].astype(np.float64) - at_q)
+    anchor = np.zeros(fit.mean.shape, np.float64)
+    anchor[idx] = anchor_q
+    new_centre = np.zeros(fit.centre.shape, np.float64)
+    new_centre[idx] = np.stack([x, y], axis=-1)
+    return LinearFit(anchor, new_centre, fit.grad, fit.support, fit.trust)
 
 
 def extrapolate(

@@ -609,14 +609,15 @@ def _hidden_layer(
         want_nd, want_rgb = s.hidden_depth != "nearest", s.inpaint_method == "linear"
         nd_fit = col_fit = None
         if want_nd and want_rgb:  # one fit of the four channels (shared position moments)
-            both = local_linear_fit(np.concatenate([ndc[..., None], rgbc], axis=2), srcw, s.fit_sigma,
-                                    ridge=(_DEPTH_RIDGE,) + (_COLOUR_RIDGE,) * 3, damp=(False, True, True, True))
-            both = anchored(both, np.concatenate([ndc[..., None], rgbc], axis=2))
+            values = np.concatenate([ndc[..., None], rgbc], axis=2)
+            both = local_linear_fit(values, srcw, s.fit_sigma, ridge=(_DEPTH_RIDGE,) + (_COLOUR_RIDGE,) * 3,
+                                    damp=(False, True, True, True), where=source)  # only sources are continued
+            both = anchored(both, values, where=source)
             nd_fit, col_fit = split_fit(both, slice(0, 1)), split_fit(both, slice(1, 4))
         elif want_nd:
-            nd_fit = local_linear_fit(ndc[..., None], srcw, s.fit_sigma, ridge=_DEPTH_RIDGE)
+            nd_fit = local_linear_fit(ndc[..., None], srcw, s.fit_sigma, ridge=_DEPTH_RIDGE, where=source)
         elif want_rgb:
-            col_fit = local_linear_fit(rgbc, srcw, s.fit_sigma, ridge=_COLOUR_RIDGE, damp=True)
+            col_fit = local_linear_fit(rgbc, srcw, s.fit_sigma, ridge=_COLOUR_RIDGE, damp=True, where=source)
         if nd_fit is not None:  # continue the background's local plane (nd is affine on it)
             bg_nd = np.maximum(extrapolate(nd_fit, nearest, source, _DEPTH_STEP * s.disparity_jump, band)[..., 0], lo)
             bg_nd = np.where(source, ndc, bg_nd)
