@@ -304,9 +304,10 @@ def anchored(fit: LinearFit, values: np.ndarray, where: Optional[np.ndarray] = N
         where: (H, W) bool, the pixels to re-centre (all by default; 0 elsewhere).
     """
     h, w = values.shape[:2]
-    idx = np.nonzero(where) if where is not None else (slice(None), slice(None))
-    y, x = np.mgrid[:h, :w].astype(np.float64)
-    y, x = y[idx], x[idx]
+    if where is None:
+        where = np.ones((h, w), bool)
+    idx = np.nonzero(where)
+    y, x = idx[0].astype(np.float64), idx[1].astype(np.float64)
     mean, centre, grad = fit.mean[idx], fit.centre[idx], fit.grad[idx]
     at_q = mean + grad[..., 0] * (x - centre[..., 0])[..., None] + grad[..., 1] * (y - centre[..., 1])[..., None]
     trust = fit.trust[idx] if fit.trust is not None else 1.0
