@@ -201,17 +201,20 @@ class LinearFit(NamedTuple):
         centre: (H, W, 2) float64 weighted mean position (x = column, y = row) of those sources.
         grad: (H, W, C, 2) float64 gradient (d/dx, d/dy) of the fit.
         support: (H, W) float64 blurred weight (0 where no source is near).
+        trust: (H, W, C) float64 in [0, 1], how far the plane explains the values near each
+            pixel (1 where the channel is not damped; see :func:`local_linear_fit`).
     """
 
     mean: np.ndarray
     centre: np.ndarray
     grad: np.ndarray
     support: np.ndarray
+    trust: Optional[np.ndarray] = None
 
 
 def local_linear_fit(
     values: np.ndarray, weight: np.ndarray, sigma: float, ridge: Union[float, Sequence[float]] = 0.02,
-    damp: Union[bool, Sequence[bool]] = False,
+    damp: Union[bool, Sequence[bool]] = False, where: Optional[np.ndarray] = None,
 ) -> LinearFit:
     """Moving least squares: at every pixel, the plane fitted to the weighted values around it.
 
@@ -232,6 +235,8 @@ def local_linear_fit(
         damp: (one, or one per channel) scale the gradient by the fit's R^2 (the share of the values' local variance
             the plane explains), from 0 at ``_R2_NOISE`` to 1 at ``_R2_SMOOTH``: noise-like
             texture gets no gradient, smooth shading keeps it.
+        where: (H, W) bool, the pixels whose fit is wanted (all by default): the moments are
+            blurred over the whole image, the fit is solved there only (0 elsewhere).
     """
     h, w = weight.shape
     wt = weight.astype(np.float32)
@@ -239,9 +244,10 @@ def local_linear_fit(
     y, x = np.mgrid[:h, :w].astype(np.float32)
     x -= w / 2.0
     y -= h / 2.0
+    idx = np.nonzero(where) if where is not None else (slice(None), slice(None))
 
-    def g(a: np.ndarray) -> np.ndarray:
-        return _as3(cv2.GaussianBlur(a, (0, 0), sigma, borderType=cv2.BORDER_CONSTANT))
+    def g(a: np.ndarray) -> np.ndarray:  # blurred over the whole image, kept where asked
+        return _as3(cv2.GaussianBlur(a, (0, 0), sigma, borderType=cv2.BORDER_CONSTANT))[idx]
 
     s0 = g(wt)[..., 0]
     inv = 1.0 / np.maximum(s0, 1e-12)
@@ -250,7 +256,7 @@ def local_linear_fit(
     cxy = g(wt * x * y)[..., 0] * inv - mx * my
     cyy = g(wt * y * y)[..., 0] * inv - my * my
     wv = v * wt[..., None]
-    mv = g(wv) * inv[..., None]  # (H, W, C)
+    mv = g(wv) * inv[..., None]  # (H, W, C), or (N, C) where asked
     cvx = g(wv * x[..., None]) * inv[..., None] - mv * mx[..., None]
     cvy = g(wv * y[..., None]) * inv[..., None] - mv * my[..., None]
     c = v.shape[-1]
@@ -260,18 +266,57 @@ def local_linear_fit(
     gx = (d * cvx - b * cvy) / det
     gy = (a * cvy - b * cvx) / det
     damped = np.broadcast_to(np.asarray(damp, bool), (c,))
+    keep = np.ones_like(gx)
     if damped.any():  # keep the gradient where the plane explains the local variance, drop it on noise
         var = g(wv * v) * inv[..., None] - mv * mv  # (H, W, C)
         r2 = (gx * cvx + gy * cvy) / np.maximum(var, 1e-12)  # R^2 of the (ridge-shrunk) fit
         keep = np.clip((r2 - _R2_NOISE) / (_R2_SMOOTH - _R2_NOISE), 0.0, 1.0)
         keep[..., ~damped] = 1.0
         gx, gy = gx * keep, gy * keep
-    return LinearFit(mv, np.stack([mx + w / 2.0, my + h / 2.0], axis=-1), np.stack([gx, gy], axis=-1), s0)
+    fields = (mv, np.stack([mx + w / 2.0, my + h / 2.0], axis=-1), np.stack([gx, gy], axis=-1), s0, keep)
+    if where is None:
+        return LinearFit(*fields)
+    full = []
+    for f in fields:
+        out = np.zeros((h, w) + f.shape[1:], f.dtype)
+        out[idx] = f
+        full.append(out)
+    return LinearFit(*full)
 
 
 def split_fit(fit: LinearFit, channels: slice) -> LinearFit:
     """The fit of some of its channels (the positions and support are shared)."""
-    return LinearFit(fit.mean[..., channels], fit.centre, fit.grad[..., channels, :], fit.support)
+    trust = fit.trust[..., channels] if fit.trust is not None else None
+    return LinearFit(fit.mean[..., channels], fit.centre, fit.grad[..., channels, :], fit.support, trust)
+
+
+def anchored(fit: LinearFit, values: np.ndarray, where: Optional[np.ndarray] = None) -> LinearFit:
+    """The fit re-centred on every pixel's own value, as far as the plane explains its neighbourhood.
+
+    A continuation from source ``q`` then starts at ``fit(q) + trust(q) (v(q) - fit(q))``: the
+    pixel's own value where the local plane explains the values (smooth shading, a plane's
+    disparity: the window mean of a curved signal is biased by its curvature, e.g. a receding
+    ground's fast-changing rows), the fit's value on noise-like texture (no speckle copied).
+
+    Args:
+        fit: a :func:`local_linear_fit` of ``values``.
+        values: (H, W, C) the fitted values.
+        where: (H, W) bool, the pixels to re-centre (all by default; 0 elsewhere).
+    """
+    h, w = values.shape[:2]
+    if where is None:
+        where = np.ones((h, w), bool)
+    idx = np.nonzero(where)
+    y, x = idx[0].astype(np.float64), idx[1].astype(np.float64)
+    mean, centre, grad = fit.mean[idx], fit.centre[idx], fit.grad[idx]
+    at_q = mean + grad[..., 0] * (x - centre[..., 0])[..., None] + grad[..., 1] * (y - centre[..., 1])[..., None]
+    trust = fit.trust[idx] if fit.trust is not None else 1.0
+    anchor_q = at_q + trust * (values[idx].astype(np.float64) - at_q)
+    anchor = np.zeros(fit.mean.shape, np.float64)
+    anchor[idx] = anchor_q
+    new_centre = np.zeros(fit.centre.shape, np.float64)
+    new_centre[idx] = np.stack([x, y], axis=-1)
+    return LinearFit(anchor, new_centre, fit.grad, fit.support, fit.trust)
 
 
 def extrapolate(

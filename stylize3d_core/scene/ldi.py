@@ -35,13 +35,19 @@ Stage 3 of the pipeline (docs/architecture.md, "Pipeline stages"), after 3DPhoto
    only*: pixels near the edge, outside the band, farther than their nearest
    foreground edge by more than the jump, and more than ``edge_exclusion_px``
    from any tear (the pixels at a tear mix foreground and background colours).
-   Depth (``hidden_depth="plane"``): the local plane of the nearest source (a
-   linear fit of ``nd``, which is affine on a plane) continued to the pixel, the
-   step capped at one jump, smoothed by a small normalised convolution, then
-   clamped to lie behind the foreground by at least ``disparity_jump``. Colour
-   (``inpaint_method="linear"``): the nearest source's local colour fit and its
-   gradient continued (the step capped at ``max_colour_step``, the gradient
-   damped on noise-like texture), so no foreground colour can bleed in. **Layer 0
+   Depth and colour (``hidden_depth="surface"``, ``inpaint_method="linear"``):
+   the local linear fit of ``nd`` (affine on a plane) and of the colour at a
+   source, anchored at the source's own value where the fit explains its
+   neighbourhood, continued to the pixel (steps capped at one jump and at
+   ``max_colour_step``, the colour gradient damped on noise-like texture): from
+   the nearest source, or, where the sources on opposite sides of the pixel
+   along its row or column continue to the same surface and that surface is not
+   the nearest source's, the inverse-squared-distance blend of the sources on
+   it (the ground behind a card that hides the ground / wall crease). The depth
+   is then smoothed by a small normalised convolution and
+   clamped to lie behind the foreground by at least ``disparity_jump``; the
+   colour, background-only, never takes a foreground pixel's, so no foreground
+   colour can bleed in. **Layer 0
    is never changed**: the photo's pixels keep their colour and depth (the
    mixed pixels on the background side of a tear included), so the photo seen
    from its own camera stays the photo. Only padded boxes around clusters of
@@ -78,7 +84,7 @@ from ..geometry.camera_range import (
 )
 from ..io.images import to_uint8
 from ._fill import (
-    LinearFit, box_clusters, continue_at, cross_median, extrapolate, local_linear_fit, nearest_index, push_pull,
+    LinearFit, anchored, box_clusters, continue_at, cross_median, extrapolate, local_linear_fit, nearest_index, push_pull,
     ring_min, scan_nearest, split_fit, torn_regions,
 )
 
@@ -154,19 +160,23 @@ class LDISettings:
     step limited to ``max_colour_step``; ``cv2.INPAINT_TELEA`` (fast marching) or
     ``cv2.INPAINT_NS`` (Navier-Stokes) from the background sources; or ``"push_pull"``: their
     multi-scale blend alone (smooth, no streaks)."""
-    hidden_depth: Literal["surface", "plane", "nearest"] = "plane"
-    """Depth of the hidden layer: ``"surface"``: the nearest of the background surfaces that
-    continue behind the foreground from its four sides (the nearest background source along
-    the pixel's row and column, each way, its local plane continued; one that would come out
-    in front of the foreground is dropped), since a nearer continued surface hides a farther
-    one: a ground plane continued behind a card hides the wall above the card, and the
-    ground's continuation beyond the ground / wall crease lies behind the wall;
-    +2-7 dB on the analytic ground scene, but on estimated depth it opens holes (astronaut:
-    0.43 % at the trajectories' extremes against 0.05 %), so it is not the default;
-    ``"plane"`` (default): the local plane of the nearest background source
-    continued (a linear fit of the disparity ``1/z`` over ``fit_sigma``, which is affine on a
-    plane), so a ground plane's hidden part stays on the ground; ``"nearest"``: the disparity
-    of the nearest background source (flat behind every edge pixel)."""
+    hidden_depth: Literal["surface", "plane", "nearest"] = "surface"
+    """Depth of the hidden layer: ``"surface"`` (default): the surface that runs on behind the
+    foreground, where the background sources on opposite sides of a hidden pixel (the nearest
+    along its row, left and right, or along its column, above and below) continue their local
+    planes to the same disparity; those sources (and any other on that surface) are blended by
+    inverse squared distance, depth and colour. A card hiding the crease where a ground meets a
+    wall then has the ground behind it, continued from its sides, not the wall continued down from
+    above the card (the analytic ground scene: +3-5 dB on the disoccluded pixels). Elsewhere
+    (no agreeing pair, or the agreeing surface is the nearest source's own) it is ``"plane"``.
+    (Taking the *nearest* of the four continued planes, the first version of this rule, opened
+    holes on estimated depth: 0.5-1 % at the photo range's corners, a receding table's plane
+    continued from its near side came out in front of the table beside the saucer, and a hidden
+    layer in front of the background beside it tears from it.) ``"plane"``: the local plane of
+    the nearest background source continued (a linear fit of the disparity ``1/z`` over
+    ``fit_sigma``, which is affine on a plane), so a ground plane's hidden part stays on the
+    ground; ``"nearest"``: the disparity of the nearest background source (flat behind every
+    edge pixel)."""
     fit_sigma: float = 2.0
     """Radius (pixels) of the local linear fits of the background behind an edge."""
     border_hidden: bool = True
@@ -377,6 +387,11 @@ _DEPTH_STEP = 1.0
 _SAME_SURFACE = 0.25
 """Continued background planes within this many ``disparity_jump`` of the nearest one are taken
 for the same surface (the closest source of them gives the hidden pixel its colour)."""
+
+_JOIN = 0.1
+"""With ``hidden_depth="surface"``, a source joins the surface its row's or column's agreeing pair
+continues when its own plane comes within this many ``disparity_jump`` of it (the wall just above
+a card where the wall runs on behind it; not where the ground has already turned away from it)."""
 
 _SEARCH_EDGES = 1500
 """The range scale is searched on at most this many foreground-edge pixels (evenly picked)."""
@@ -594,13 +609,15 @@ def _hidden_layer(
         want_nd, want_rgb = s.hidden_depth != "nearest", s.inpaint_method == "linear"
         nd_fit = col_fit = None
         if want_nd and want_rgb:  # one fit of the four channels (shared position moments)
-            both = local_linear_fit(np.concatenate([ndc[..., None], rgbc], axis=2), srcw, s.fit_sigma,
-                                    ridge=(_DEPTH_RIDGE,) + (_COLOUR_RIDGE,) * 3, damp=(False, True, True, True))
+            values = np.concatenate([ndc[..., None], rgbc], axis=2)
+            both = local_linear_fit(values, srcw, s.fit_sigma, ridge=(_DEPTH_RIDGE,) + (_COLOUR_RIDGE,) * 3,
+                                    damp=(False, True, True, True), where=source)  # only sources are continued
+            both = anchored(both, values, where=source)
             nd_fit, col_fit = split_fit(both, slice(0, 1)), split_fit(both, slice(1, 4))
         elif want_nd:
-            nd_fit = local_linear_fit(ndc[..., None], srcw, s.fit_sigma, ridge=_DEPTH_RIDGE)
+            nd_fit = local_linear_fit(ndc[..., None], srcw, s.fit_sigma, ridge=_DEPTH_RIDGE, where=source)
         elif want_rgb:
-            col_fit = local_linear_fit(rgbc, srcw, s.fit_sigma, ridge=_COLOUR_RIDGE, damp=True)
+            col_fit = local_linear_fit(rgbc, srcw, s.fit_sigma, ridge=_COLOUR_RIDGE, damp=True, where=source)
         if nd_fit is not None:  # continue the background's local plane (nd is affine on it)
             bg_nd = np.maximum(extrapolate(nd_fit, nearest, source, _DEPTH_STEP * s.disparity_jump, band)[..., 0], lo)
             bg_nd = np.where(source, ndc, bg_nd)
@@ -644,10 +661,12 @@ def _nearest_surface(
 ) -> Tuple[np.ndarray, Optional[np.ndarray]]:
     """Hidden-layer disparity (h, w) and colour (N, 3) of the band's N pixels (raster order) or None.
 
-    Every band pixel takes, of the four background sources nearest along its row and column,
-    the one whose plane continued to it is nearest (largest ``nd``) while still behind the
-    foreground by ``disparity_jump``; pixels with no such candidate keep ``fallback_nd``
-    (and the Voronoi colour).
+    Every band pixel looks at the four background sources nearest along its row and column
+    and continues their planes (and colour fits) to it; one that would come out in front of
+    the foreground (or far beyond anything seen) is dropped. Where the two sources of a row
+    or of a column agree (within ``_SAME_SURFACE`` jumps), the pixel takes the blend of the
+    agreeing ones, weighted by inverse squared distance; pixels with no agreeing pair keep
+    ``fallback_nd`` (and the Voronoi colour).
     """
     br, bc = np.nonzero(band)
     cand = scan_nearest(source)[:, br, bc]  # (4, N, 2)
@@ -659,22 +678,43 @@ def _nearest_surface(
         ok = cand[k, :, 0] >= 0
         nds[k, ok] = continue_at(nd_fit, cand[k][ok], (pix[0][ok], pix[1][ok]), _DEPTH_STEP * s.disparity_jump)[:, 0]
     nds[(nds > limit) | (nds < lo)] = -np.inf  # in front of the foreground, or far beyond anything seen
-    nearest_nd = nds.max(axis=0)  # (N,)
-    # of the candidates on that nearest surface (within _SAME_SURFACE jumps of it), the closest source
-    on_top = nds >= (nearest_nd - _SAME_SURFACE * s.disparity_jump)[None]
-    best_k = np.argmin(np.where(on_top, dist, np.iinfo(np.int64).max), axis=0)
-    best = nds[best_k, np.arange(len(br))]
-    best_k[~np.isfinite(nearest_nd)] = -1
+    # A surface runs behind the foreground where the sources on opposite sides of the pixel (left
+    # and right, or above and below) continue to the same disparity: the ground beside a card, on
+    # its row, not the wall above it, whose plane the nearest source (just above the card) would
+    # continue. Those pairs are blended by inverse squared distance (interpolated across the gap,
+    # and continuous with the nearer source); a pixel with no agreeing pair keeps the nearest
+    # source's plane (continued from one side alone, a surface is no more than a guess, and a
+    # guess in front of the background beside it tears from it: on estimated depth the nearest
+    # of the four continued planes opened holes).
+    valid = np.isfinite(nds)
+    finite = np.where(valid, nds, 0.0)
+    agree = np.zeros((4, len(br)), bool)
+    for a, b in ((0, 1), (2, 3)):
+        pair = valid[a] & valid[b] & (np.abs(finite[a] - finite[b]) <= _SAME_SURFACE * s.disparity_jump)
+        agree[a] |= pair
+        agree[b] |= pair
+    inv_d2 = 1.0 / np.maximum(dist, 1).astype(np.float64) ** 2  # (4, N)
+    wts = np.where(agree, inv_d2, 0.0)
+    total = wts.sum(axis=0)
+    found = total > 0
+    surface = (wts * finite).sum(axis=0) / np.maximum(total, 1e-300)  # (N,)
+    # where that surface is the nearest source's own (a card on one wall), the nearest source's
+    # continuation stays: it is the closest evidence, in any direction
+    found &= np.abs(surface - fallback_nd[br, bc]) > _JOIN * s.disparity_jump
+    # every source on that surface joins (the one just above a card, where the wall runs on behind it)
+    on_it = valid & found[None] & (np.abs(finite - surface[None]) <= _JOIN * s.disparity_jump)
+    wts = np.where(on_it | agree, inv_d2, 0.0)
+    wts[:, ~found] = 0.0
+    wts[:, found] /= wts[:, found].sum(axis=0)
     out = fallback_nd.copy()
-    found = best_k >= 0
-    out[br[found], bc[found]] = best[found]
+    out[br[found], bc[found]] = (wts * finite).sum(axis=0)[found]
     if col_fit is None:
         return out, None
-    rgb = col_fit.mean[br, bc] * 0.0  # (N, 3)
+    rgb = np.zeros((len(br), 3))
     for k in range(4):
-        sel = best_k == k
+        sel = wts[k] > 0
         if sel.any():
-            rgb[sel] = continue_at(col_fit, cand[k][sel], (pix[0][sel], pix[1][sel]), s.max_colour_step)
+            rgb[sel] += wts[k, sel, None] * continue_at(col_fit, cand[k][sel], (pix[0][sel], pix[1][sel]), s.max_colour_step)
     if not found.all():  # no candidate: the Voronoi continuation
         nearest = nearest_index(source)
         fb = extrapolate(col_fit, nearest, source, s.max_colour_step, band)

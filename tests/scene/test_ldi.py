@@ -451,7 +451,7 @@ def test_hidden_ground_continues_the_ground_plane():
     inner = np.zeros((h, w), bool)
     inner[56:92, 66:94] = True  # away from the top edge (the plane's own bend)
     want = np.broadcast_to(floor_nd, (h, w))
-    for mode, rtol in (("plane", 0.1), ("nearest", 0.3)):  # ridge and step clip shrink slopes
+    for mode, rtol in (("surface", 0.1), ("plane", 0.1), ("nearest", 0.3)):  # ridge and step clip shrink slopes
         ldi = build_ldi(rgb, depth, LDISettings(band=0.08, hidden_depth=mode))
         mask = photo(ldi, ldi.hidden_mask)
         sel = mask & inner
@@ -461,3 +461,61 @@ def test_hidden_ground_continues_the_ground_plane():
         if mode != "nearest":  # the floor recedes up the image behind the card too
             column = got_nd[56:92, 66]
             assert (np.diff(column) > 0).all()
+
+
+def test_hidden_layer_follows_the_ground_past_a_crease_behind_a_card():
+    """A card hides the crease where a receding ground meets a wall: below the crease the hidden
+    layer lies on the ground (continued from the card's sides, along the rows), above it on the
+    wall, in depth and in colour, not the wall continued down from the card's top edge."""
+    h, w, crease = 120, 160, 50
+    rows = np.arange(h, dtype=np.float32)[:, None]
+    wall_nd, slope = 0.2, 0.01
+    bg_nd = np.where(rows < crease, wall_nd, wall_nd + slope * (rows - crease))  # continuous at the crease
+    depth = np.broadcast_to(1.0 / bg_nd, (h, w)).astype(np.float32).copy()
+    # the ground's colour changes along the rows (a receding texture), the wall's is flat
+    bg_rgb = np.where(rows[..., None] < crease, np.float32([0.2, 0.3, 0.8]),
+                      np.stack([0.3 + 0.004 * (rows - crease), np.full_like(rows, 0.6), 0.5 - 0.004 * (rows - crease)],
+                               axis=-1))
+    rgb = np.broadcast_to(bg_rgb, (h, w, 3)).astype(np.float32).copy()
+    card = (slice(45, 110), slice(60, 100))  # its top 5 rows above the crease
+    depth[card] = 1.0 / 1.5
+    rgb[card] = (0.9, 0.9, 0.2)
+    want_nd = np.broadcast_to(bg_nd, (h, w))
+    want_rgb = np.broadcast_to(bg_rgb, (h, w, 3))
+    errors = {}
+    for mode in ("surface", "plane"):
+        ldi = build_ldi(rgb, depth, LDISettings(band=0.1, hidden_depth=mode))
+        mask = photo(ldi, ldi.hidden_mask)
+        got_nd = ldi.depth_scale / np.where(mask, photo(ldi, ldi.hidden_depth), 1.0)
+        ground = mask.copy()
+        ground[:crease + 4] = False  # below the crease (the smoothing of the fill spans ~2 px)
+        assert ground.sum() > 300
+        errors[mode] = (float(np.abs(got_nd - want_nd)[ground].max() / slope),
+                        float(np.abs(photo(ldi, ldi.hidden_rgb) - want_rgb)[ground].max()))
+    print(f"\nground behind the card: largest disparity error (in rows of the ground's slope) / colour error:"
+          f" surface {errors['surface'][0]:.2f} / {errors['surface'][1]:.3f},"
+          f" plane {errors['plane'][0]:.2f} / {errors['plane'][1]:.3f}")
+    assert errors["surface"][0] < 1.5  # within ~a row's disparity step of the ground (the smoothing at the band's inner rim)
+    assert errors["surface"][1] < 0.02
+
+
+def test_anchored_fit_starts_from_the_source_value_on_smooth_signals_only():
+    from stylize3d_core.scene._fill import anchored, continue_at, local_linear_fit
+
+    y, x = np.mgrid[:40, :60].astype(np.float64)
+    curved = (0.1 + 0.002 * (y - 20.0) ** 2)[..., None]  # fast-changing rows, as a receding ground's texture
+    source = (x >= 30).astype(np.float32)
+    fit = local_linear_fit(curved, source, 2.0, ridge=0.0)
+    at = np.array([[20, 30], [5, 30]])
+    plain = continue_at(fit, at, (at[:, 0].astype(float), at[:, 1] - 10.0), np.inf)[:, 0]
+    assert np.abs(plain - curved[at[:, 0], at[:, 1], 0]).max() > 1e-3  # the window mean is biased by the curvature
+    got = continue_at(anchored(fit, curved), at, (at[:, 0].astype(float), at[:, 1] - 10.0), np.inf)[:, 0]
+    np.testing.assert_allclose(got, curved[at[:, 0], at[:, 1], 0], atol=1e-4)  # along the row: the source's own value
+    noise = np.random.default_rng(1).uniform(0.0, 0.3, (40, 60, 1))
+    damped = local_linear_fit(noise, source, 2.0, damp=True)
+    flat = anchored(damped, noise)
+    q = (x >= 32) & (damped.trust[..., 0] == 0)  # noise-like: the fit's value, no speckle copied
+    assert q.sum() > 50
+    at_q = damped.mean[..., 0] + damped.grad[..., 0, 0] * (x - damped.centre[..., 0]) + damped.grad[..., 0, 1] * (
+        y - damped.centre[..., 1])
+    np.testing.assert_allclose(flat.mean[..., 0][q], at_q[q], atol=1e-9)

@@ -83,23 +83,23 @@ def poles_scene() -> Scene:
 
 SCENES = {"card before wall": card_scene, "slanted ground": ground_scene, "thin poles": poles_scene}
 
-FLOOR_DB = {"card before wall": 30.0, "slanted ground": 17.0, "thin poles": 30.0}
+FLOOR_DB = {"card before wall": 30.0, "slanted ground": 21.0, "thin poles": 30.0}
 """Least PSNR on the disoccluded pixels per scene, a little under what the 3D photo reaches today
 (the issue's target is 30 dB; the slanted ground misses it, see docs/clean_3d_photos.md)."""
 
 BEFORE_DB = {
-    ("card before wall", "sideways"): 27.3, ("card before wall", "sideways-left"): 27.3,
-    ("card before wall", "vertical"): 26.7, ("card before wall", "vertical-up"): 26.7,
+    ("card before wall", "sideways"): 32.0, ("card before wall", "sideways-left"): 32.0,
+    ("card before wall", "vertical"): 30.8, ("card before wall", "vertical-up"): 30.9,
     ("card before wall", "ken-burns corner"): 37.3,
-    ("slanted ground", "sideways"): 23.3, ("slanted ground", "sideways-left"): 19.7,
-    ("slanted ground", "vertical-up"): 16.5, ("slanted ground", "forward"): 35.5,
-    ("slanted ground", "ken-burns corner"): 23.5,
+    ("slanted ground", "sideways"): 23.3, ("slanted ground", "sideways-left"): 28.1,
+    ("slanted ground", "vertical-up"): 17.3, ("slanted ground", "forward"): 36.2,
+    ("slanted ground", "ken-burns corner"): 23.6,
     ("thin poles", "sideways"): 40.2, ("thin poles", "sideways-left"): 39.4,
-    ("thin poles", "forward"): 29.8, ("thin poles", "ken-burns corner"): 30.7,
+    ("thin poles", "forward"): 33.4, ("thin poles", "ken-burns corner"): 33.2,
 }
-"""Disoccluded PSNR before silhouettes were blended by coverage (``PlainRenderSettings.blend_coverage``:
-a silhouette pixel then took the nearer surface's colour whole, so silhouettes grew by up to a
-pixel into the disoccluded strip), printed next to today's for comparison."""
+"""Disoccluded PSNR before the hidden layer followed the surface that opposite sources agree on
+(``LDISettings.hidden_depth="surface"``) and continued fits from the sources' own values: the
+ground behind the card was the wall continued down from above it. Printed next to today's."""
 
 
 def camera(t) -> Cameras:
