@@ -81,6 +81,10 @@ def _as_f32_array(points: torch.Tensor, name: str, allow_empty: bool = False) ->
     return np.ascontiguousarray(points.detach().cpu().numpy(), dtype=np.float32)
 
 
+QUERY_CHUNK_RESULTS = 1 << 19
+"""Neighbours (queries x k) found per call of Open3D's search (:meth:`KNNIndex.knn`): ~50-100 ms each."""
+
+
 class KNNIndex:
     """A k-d tree over fixed ``source`` points, built once and queried any number of times.
 
@@ -124,11 +128,19 @@ class KNNIndex:
         if len(qry) == 0:
             return KNNResult(torch.zeros(0, k, dtype=torch.long), torch.zeros(0, k))
         k_eff = min(k, self.num_points)
-        idx, sq_dist = self._nns.knn_search(self._o3c.Tensor(qry), k_eff)
-        # Copy out of Open3D's memory: a torch tensor still viewing it at interpreter
-        # exit makes Open3D print a memory-leak warning.
-        idx_t = torch.from_numpy(idx.numpy().astype(np.int64)).reshape(len(qry), k_eff)  # (M, k_eff)
-        d_t = torch.from_numpy(sq_dist.numpy().astype(np.float32, copy=True)).reshape(len(qry), k_eff)
+        # In chunks of queries: Open3D's search holds the GIL for the whole call (~0.8 s for every point
+        # of a photo), which froze the viewer's window while its worker thread prepared a photo; between
+        # chunks other threads run. Each query's answer depends only on the tree: the same result.
+        rows = max(1, QUERY_CHUNK_RESULTS // k_eff)
+        idx_t = torch.empty((len(qry), k_eff), dtype=torch.long)
+        d_t = torch.empty((len(qry), k_eff), dtype=torch.float32)
+        for r0 in range(0, len(qry), rows):
+            part = qry[r0:r0 + rows]
+            idx, sq_dist = self._nns.knn_search(self._o3c.Tensor(part), k_eff)
+            # Copied out of Open3D's memory: a torch tensor still viewing it at interpreter
+            # exit makes Open3D print a memory-leak warning.
+            idx_t[r0:r0 + len(part)] = torch.from_numpy(idx.numpy().reshape(len(part), k_eff))
+            d_t[r0:r0 + len(part)] = torch.from_numpy(sq_dist.numpy().reshape(len(part), k_eff))
         if k_eff == k:
             return KNNResult(idx_t, d_t)
         pad = k - k_eff

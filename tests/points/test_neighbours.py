@@ -148,3 +148,16 @@ def test_inputs_not_modified_and_float64_accepted():
 def test_bad_inputs(src, qry, radius, k):
     with pytest.raises(InputError):
         ball_query(src, qry, radius, k)
+
+
+def test_knn_in_chunks_of_queries_is_the_same_search(monkeypatch):
+    """Queries go to Open3D in chunks (the GIL is free between them): the same neighbours and distances."""
+    from stylize3d_core.points import neighbours
+    from stylize3d_core.points.neighbours import KNNIndex
+
+    pts = torch.rand(3000, 3, generator=torch.Generator().manual_seed(4))
+    index = KNNIndex(pts)
+    whole = index.knn(pts, 7)
+    monkeypatch.setattr(neighbours, "QUERY_CHUNK_RESULTS", 50)  # 7 queries per call, a ragged last chunk
+    parts = index.knn(pts, 7)
+    assert torch.equal(parts.idx, whole.idx) and torch.equal(parts.sq_dist, whole.sq_dist)
