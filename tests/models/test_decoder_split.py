@@ -113,6 +113,21 @@ def test_split_decoding_shows_the_full_size_colours_and_fills_holes_from_the_sma
     torch.testing.assert_close(out[:, :, holes], zero[:, :, holes], rtol=0, atol=1e-6)
 
 
+def _unet_by_hand(dec: UNetDecoder, small: torch.Tensor, mask: torch.Tensor):
+    """The U-Net's last-conv output (cropped to the input's size) and its transform coefficients, computed
+    layer by layer without the decoder's forward: the reference the split path is checked against."""
+    h, w = small.shape[-2:]
+    x = decoder_module._assemble(small, mask, 2**dec.config.levels, True, None)
+    skips = []
+    for skip, down in zip(dec.skips, dec.downs):
+        skips.append(skip(x))
+        x = down(x)
+    coeff = dec.transform(x * dec.config.transform_gain)
+    for i in reversed(range(dec.config.levels)):
+        x = dec.ups[i](x, skips[i])
+    return dec.out_rgb(torch.relu(dec.out_conv(x)))[..., :h, :w], coeff
+
+
 def test_split_decoding_with_a_varying_head_upsamples_the_field_over_the_frame():
     """A head that depends on the features: the field is upsampled to the small frame, cropped, then to the
     output size (one smooth field over the frame's extent); a constant detail frame gives its known value."""
@@ -124,16 +139,8 @@ def test_split_decoding_with_a_varying_head_upsamples_the_field_over_the_frame()
     with torch.inference_mode():
         out = dec(small, small_mask, detail=(colours, coverage))
         # the same from the parts: the U-Net's rgb and its coefficients, computed by hand
-        x = decoder_module._assemble(small, small_mask, 4, True, None)
-        skips = []
-        for skip, down in zip(dec.skips, dec.downs):
-            skips.append(skip(x))
-            x = down(x)
-        coeff = dec.transform(x * CFG.transform_gain)
-        y = x
-        for i in reversed(range(CFG.levels)):
-            y = dec.ups[i](y, skips[i])
-        rgb = torch.sigmoid(dec.out_rgb(torch.relu(dec.out_conv(y))))[..., :9, :14]
+        y, coeff = _unet_by_hand(dec, small, small_mask)
+        rgb = torch.sigmoid(y)
         field = upsample_to(upsample_to(coeff, (12, 16))[..., :9, :14], (27, 42))
         a = field[:, :9].reshape(1, 3, 3, 27, 42)
         rgb = upsample_to(rgb, (27, 42))
@@ -259,15 +266,7 @@ def test_split_decoding_upsamples_the_texture_residual(head):
     with torch.inference_mode():
         out = dec(small, small_mask, detail=(colours, coverage))
         # the reference: the small decode's outputs by hand, upsampled, then the general transform
-        x = decoder_module._assemble(small, small_mask, 4, True, None)
-        skips = []
-        for skip, down in zip(dec.skips, dec.downs):
-            skips.append(skip(x))
-            x = down(x)
-        coeff = dec.transform(x * cfg.transform_gain)
-        for i in reversed(range(cfg.levels)):
-            x = dec.ups[i](x, skips[i])
-        y = dec.out_rgb(torch.relu(dec.out_conv(x)))[..., :9, :14]
+        y, coeff = _unet_by_hand(dec, small, small_mask)
         rgb = upsample_to(torch.sigmoid(y[:, :3]), (18, 28))
         tex = upsample_to(0.5 * torch.tanh(y[:, 3:]), (18, 28))
         coeff = upsample_to(coeff, (12, 16))[..., :9, :14]
