@@ -28,6 +28,7 @@ from .io.images import load_image
 from .io.ply import write_ply
 from .io.video import MAX_GIF_FPS, Progress
 from .options import check_options, documented, option
+from .points.sampling import start_fps_process
 from .render.plain import PlainRenderer, PlainRenderSettings, frame_size
 from .resources import DEFAULT_MODEL_NAME, default_model, resolve_model
 from .scene.ldi import LDISettings
@@ -237,6 +238,7 @@ def _load_photo3d(spec: PhotoSpec, log: Log) -> Tuple[Photo3D, Tuple[int, int]]:
     if spec.stereo_card:
         depth = "stereo:card"
     refine = None if spec.refine_depth is None else RefineSettings(method=spec.refine_depth)
+    start_fps_process()  # its imports run beside the depth and LDI stages, ready for the model's geometry
     t0 = time.perf_counter()
     image = load_image(photo, max_size=max_size)
     source = parse_depth_spec(depth, refine=refine)

@@ -46,6 +46,7 @@ from .models.colour_transfer import ColourTransfer, LabStats, lab_stats, mix_sta
 from .models.style_features import StyleEncoder, StyleFeatures
 from .models.scene_geometry import SceneGeometry, prepare_geometry
 from .models.stylize3d import Stylize3DModel
+from .points.sampling import start_fps_process
 from .render.plain import StratifiedOrder, preview_point_count
 from .render.rasterizer import columns
 from .scene.photo3d import Photo3D
@@ -182,6 +183,7 @@ class Stylized3DPhoto:
         self.photo = photo
         self.timings: Dict[str, float] = {}
         self._style_encoder = style_encoder
+        start_fps_process()  # a no-op when it runs already (load_photo3d starts it)
         t0 = time.perf_counter()
         pts = photo.points.to_tensors()
         with torch.inference_mode():

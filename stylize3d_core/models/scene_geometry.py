@@ -207,8 +207,9 @@ def _build_hierarchy(
     and each level's centres are some of the previous level's points, so one k-NN search of
     each level among itself gives both its own balls (the stem's, or the stage's ``same``
     balls) and, by rows, the next stage's ``down`` balls: three searches instead of five for
-    the default two stages, the same indices. The FPS of the next level (``fpsample``
-    releases the GIL) runs in a worker thread while the level's k-NN search runs.
+    the default two stages, the same indices. The FPS of the next level runs in a worker thread while the level's k-NN
+    search runs (large levels in fpsample's worker process, so the two really overlap; see
+    :mod:`stylize3d_core.points.sampling`).
     """
     if not isinstance(config, NeighbourhoodConfig):
         raise InputError("config", f"expected a NeighbourhoodConfig, got {type(config).__name__}")

@@ -21,11 +21,32 @@ Two quirks of fpsample 1.0.2 are handled here:
   fewer distinct positions than ``n``), it repeats indices. We keep indices
   distinct by filling those slots with the unpicked points in ascending order,
   which is what the textbook loop does when it never re-picks a point.
+
+fpsample holds Python's GIL for the whole call (0.6-0.8 s for a photo's 300k
+points), which would freeze every other Python thread: a viewer's window while
+its worker prepares a photo, or the k-NN search that :func:`prepare_geometry`
+runs beside the next level's sampling. So clouds of at least
+:data:`PROCESS_MIN_POINTS` points are sampled in a small worker process
+(:mod:`._fps_worker`: numpy and fpsample only, started once and kept), with the
+same call and so the same indices. Any failure of that process falls back to the
+call in this process, with a warning. :func:`set_fps_process` turns the worker
+off (so does the environment variable ``STYLIZE3D_FPS_PROCESS=0``);
+:func:`start_fps_process` starts it early, so that the first sampling does not
+wait for its imports.
 """
 
 from __future__ import annotations
 
+import atexit
 import math
+import os
+import struct
+import subprocess
+import sys
+import threading
+import warnings
+from pathlib import Path
+from typing import Optional
 
 import fpsample
 import numpy as np
@@ -34,6 +55,127 @@ import torch
 from ..checks import check_finite, check_shape
 from ..errors import InputError
 from .neighbours import check_count
+
+
+PROCESS_MIN_POINTS = 32768
+"""Clouds from this size up are sampled in the worker process (smaller ones take
+under ~30 ms, less than the round trip is worth)."""
+
+_WORKER_SOURCE = Path(__file__).with_name("_fps_worker.py")
+
+
+class _Worker:
+    """One fpsample worker process, shared by all threads (requests take turns)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._proc: Optional[subprocess.Popen] = None
+        self._ready = False
+        self.enabled = os.environ.get("STYLIZE3D_FPS_PROCESS", "1").strip().lower() not in ("0", "false", "no", "off")
+
+    def start(self) -> None:
+        """Start the process if it is not running (returns at once; its imports run meanwhile)."""
+        with self._lock:
+            self._spawn()
+
+    def _spawn(self) -> None:
+        if self._proc is not None:
+            if self._proc.poll() is None:
+                return
+            self._stop()  # it ended (killed?): close its pipes and start a new one
+        env = dict(os.environ)
+        # numpy and fpsample where this process found them, whatever sys.path tricks brought them here
+        found = [str(Path(m.__file__).resolve().parent.parent) for m in (np, fpsample)]
+        env["PYTHONPATH"] = os.pathsep.join(dict.fromkeys(found + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p]))
+        self._proc = subprocess.Popen(
+            [sys.executable, "-c", _WORKER_SOURCE.read_text(encoding="utf-8")],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env, bufsize=0)
+        self._ready = False
+
+    def _write(self, view: memoryview) -> None:
+        while len(view):
+            view = view[self._proc.stdin.write(view):]  # an unbuffered pipe may take part of it
+
+    def _read(self, n: int) -> bytes:
+        data = bytearray()
+        while len(data) < n:
+            chunk = self._proc.stdout.read(n - len(data))  # blocks without the GIL
+            if not chunk:
+                raise EOFError("the worker process ended")
+            data += chunk
+        return bytes(data)
+
+    def sample(self, pts: np.ndarray, n_samples: int, height: int, start: int) -> np.ndarray:
+        """fpsample's indices for ``pts`` (N, 3) float32, computed in the worker."""
+        with self._lock:
+            try:
+                self._spawn()
+                if not self._ready:
+                    if self._read(1) != b"R":
+                        raise EOFError("the worker process did not start")
+                    self._ready = True
+                self._write(memoryview(struct.pack("<4q", pts.shape[0], n_samples, height, start)))
+                self._write(memoryview(np.ascontiguousarray(pts)).cast("B"))
+                status, n_bytes = struct.unpack("<2q", self._read(16))
+                payload = self._read(n_bytes)
+            except (OSError, EOFError, ValueError) as e:
+                self._stop()
+                raise RuntimeError(f"farthest point sampling worker failed: {e}") from e
+        if status != 0:
+            raise RuntimeError(f"farthest point sampling worker failed: {payload.decode('utf-8', 'replace')}")
+        return np.frombuffer(payload, dtype=np.int64).copy()
+
+    def _stop(self) -> None:
+        proc, self._proc, self._ready = self._proc, None, False
+        if proc is None:
+            return
+        for stream in (proc.stdin, proc.stdout):
+            try:
+                stream.close()
+            except OSError:
+                pass
+        try:
+            proc.wait(timeout=2)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+    def stop(self) -> None:
+        """End the process (the next large sampling starts a new one)."""
+        with self._lock:
+            self._stop()
+
+
+_WORKER = _Worker()
+atexit.register(_WORKER.stop)
+
+
+def set_fps_process(enabled: bool) -> None:
+    """Sample large clouds in the worker process (True, the default) or in this process (False)."""
+    _WORKER.enabled = bool(enabled)
+    if not enabled:
+        _WORKER.stop()
+
+
+def start_fps_process() -> None:
+    """Start the worker process now (if it is enabled), so that it is ready when a photo's geometry is prepared."""
+    if _WORKER.enabled:
+        try:
+            _WORKER.start()
+        except OSError as e:
+            warnings.warn(f"could not start the farthest point sampling worker ({e}); sampling in this process")
+            _WORKER.enabled = False
+
+
+def _fpsample(pts: np.ndarray, n_samples: int, height: int, start: int) -> np.ndarray:
+    """fpsample's bucket FPS, in the worker process for large clouds (see the module docstring)."""
+    if _WORKER.enabled and pts.shape[0] >= PROCESS_MIN_POINTS:
+        try:
+            return _WORKER.sample(pts, n_samples, height, start)
+        except RuntimeError as e:
+            warnings.warn(f"{e}; sampling in this process from now on")
+            _WORKER.enabled = False
+    return np.asarray(fpsample.bucket_fps_kdline_sampling(pts, n_samples, height, start_idx=start), dtype=np.int64)
 
 
 def _tree_height(n_points: int) -> int:
@@ -93,6 +235,5 @@ def farthest_point_sample(xyz: torch.Tensor, n_samples: int, start: int = 0) -> 
         return torch.zeros(1, dtype=torch.long)
 
     pts = np.ascontiguousarray(xyz.detach().cpu().numpy(), dtype=np.float32)  # (N, 3)
-    idx = fpsample.bucket_fps_kdline_sampling(pts, n_samples, _tree_height(n_points), start_idx=start)
-    idx = _make_distinct(np.asarray(idx, dtype=np.int64), n_points)  # (n_samples,)
+    idx = _make_distinct(_fpsample(pts, n_samples, _tree_height(n_points), start), n_points)  # (n_samples,)
     return torch.from_numpy(idx)

@@ -101,3 +101,73 @@ def test_tree_height_is_valid():
 def test_bad_inputs(xyz, n, start):
     with pytest.raises(InputError):
         farthest_point_sample(xyz, n, start=start)
+
+
+# --- the worker process (large clouds): the same indices, without holding the GIL ---
+
+from stylize3d_core.points import sampling as _sampling  # noqa: E402
+
+
+@pytest.fixture
+def fps_worker():
+    """The worker enabled (restored afterwards, whatever the environment says)."""
+    before = _sampling._WORKER.enabled
+    _sampling.set_fps_process(True)
+    yield _sampling._WORKER
+    _sampling._WORKER.enabled = before
+
+
+def test_worker_process_gives_the_in_process_indices(fps_worker, surface_cloud):
+    xyz = surface_cloud(200, 200, jitter=0.5)  # 40k points: above PROCESS_MIN_POINTS
+    assert xyz.shape[0] >= _sampling.PROCESS_MIN_POINTS
+    xyz[:500] = xyz[0]  # coincident points too
+    a = farthest_point_sample(xyz, 2000, start=3)
+    assert fps_worker._proc is not None and fps_worker._proc.poll() is None  # it ran in the worker
+    _sampling.set_fps_process(False)
+    assert fps_worker._proc is None  # turning it off ends the process
+    b = farthest_point_sample(xyz, 2000, start=3)
+    assert torch.equal(a, b)
+    ref = farthest_point_sample_reference(xyz, 300, first=int(a[0]))
+    assert torch.equal(a[:300], ref)
+
+
+def test_worker_process_leaves_other_threads_running(fps_worker):
+    import threading
+    import time
+
+    xyz = torch.rand(200_000, 3, generator=torch.Generator().manual_seed(4))
+    _sampling.start_fps_process()
+    farthest_point_sample(xyz[:40_000], 10)  # the worker's imports are done
+    done = threading.Event()
+    worker = threading.Thread(target=lambda: (farthest_point_sample(xyz, 50_000), done.set()))
+    ticks = 0
+    worker.start()
+    while not done.is_set():  # in-process fpsample holds the GIL: this loop would not run until it ends
+        time.sleep(0.001)
+        ticks += 1
+    worker.join()
+    assert ticks >= 10
+
+
+def test_a_killed_worker_is_replaced(fps_worker, surface_cloud):
+    xyz = surface_cloud(200, 180)
+    _sampling.start_fps_process()
+    fps_worker._proc.kill()
+    fps_worker._proc.wait()
+    a = farthest_point_sample(xyz, 500)
+    assert fps_worker.enabled and fps_worker._proc.poll() is None
+    ref = farthest_point_sample_reference(xyz, 500, first=int(a[0]))
+    assert torch.equal(a, ref)
+
+
+def test_worker_failure_falls_back_to_this_process(fps_worker, surface_cloud, tmp_path, monkeypatch):
+    broken = tmp_path / "broken_worker.py"
+    broken.write_text("import sys\nsys.exit(3)\n")
+    fps_worker.stop()
+    monkeypatch.setattr(_sampling, "_WORKER_SOURCE", broken)
+    xyz = surface_cloud(200, 180)
+    with pytest.warns(UserWarning, match="farthest point sampling worker failed"):
+        a = farthest_point_sample(xyz, 500)
+    assert not fps_worker.enabled  # the rest of the session samples here
+    ref = farthest_point_sample_reference(xyz, 500, first=int(a[0]))
+    assert torch.equal(a, ref)
