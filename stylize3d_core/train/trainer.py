@@ -49,7 +49,7 @@ from ..io.atomic import atomic_path
 from ..models.checkpoint import load_checkpoint, save_checkpoint
 from ..models.colour_transfer import lab_stats, transfer_colours
 from ..models.efficientnet_lite import EfficientNetLiteFeatures
-from ..models.losses import PerceptualLoss, PerceptualLossConfig, StylizationLoss, colour_statistics_loss
+from ..models.losses import PerceptualLoss, PerceptualLossConfig, StylizationLoss, colour_statistics_loss, detail_loss
 from ..models.style_features import StyleEncoder
 from ..models.stylize3d import (ConfigName, ModelConfig, Stylize3DModel, add_colour_transform, add_detail_path,
                                 add_texture_residual)
@@ -83,6 +83,9 @@ class LossWeights:
         teacher_perceptual: stage 2 teacher samples, EfficientNet feature L1 against them. Default 0.05.
         colour: stage 2, L*a*b* mean/std of every stylized view against the style image's
             (:func:`~stylize3d_core.models.losses.colour_statistics_loss`, raw ~0.02-0.3). Default 2.
+        teacher_detail: stage 2 teacher samples, L1 of the Laplacian against them
+            (:func:`~stylize3d_core.models.losses.detail_loss`, raw ~0.02-0.05): the teacher's
+            strokes, which the pixel L1 lets a blur average away. Default 0 (off).
     """
 
     l1: float = 1.0
@@ -94,6 +97,7 @@ class LossWeights:
     teacher: float = 1.0
     teacher_perceptual: float = 0.05
     colour: float = 2.0
+    teacher_detail: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -251,6 +255,8 @@ class TrainStep(nn.Module):
                 terms["teacher"] = w.teacher * ((pred - t_target).abs() * t_mask).sum() / (
                     3 * t_mask.sum()).clamp(min=1.0)
                 terms["teacher_perceptual"] = w.teacher_perceptual * self.perceptual(pred, t_target)
+                if w.teacher_detail:
+                    terms["teacher_detail"] = w.teacher_detail * detail_loss(pred, t_target, teacher[1].to(pred.device))
         n = geom.xyz.shape[0]
         pick = torch.randperm(n, generator=generator)[: self.consistency_points]
         weight = w.consistency if style is None else w.consistency_stylized

@@ -8,6 +8,7 @@ import torch.nn.functional as F
 
 from stylize3d_core.errors import InputError
 from stylize3d_core.models.efficientnet_lite import EfficientNetLiteFeatures
+from stylize3d_core.models.losses import detail_loss
 from stylize3d_core.models.losses import (
     PerceptualLoss,
     PerceptualLossConfig,
@@ -193,3 +194,37 @@ def test_rgb_to_lab_matches_opencv_and_colour_loss_has_finite_gradients():
     loss = colour_statistics_loss(pred, torch.zeros(1, 3, 5, 5))  # towards black: a large distance
     loss.backward()
     assert loss > 0.2 and torch.isfinite(pred.grad).all() and pred.grad.abs().sum() > 0
+
+
+def test_detail_loss_known_values_and_masking():
+    g = torch.Generator().manual_seed(0)
+    target = torch.rand(2, 3, 12, 10, generator=g)
+    assert detail_loss(target, target).item() == 0.0
+    # a constant or linear offset has no Laplacian: no detail difference
+    ramp = torch.linspace(0, 1, 10).expand(2, 3, 12, 10)
+    assert detail_loss(target + 0.3 + 0.5 * ramp, target).item() == pytest.approx(0.0, abs=1e-6)
+    # one pixel raised by d: the Laplacian differs by -4d there and by d at its 4 neighbours
+    pred = target.clone()
+    pred[0, 1, 5, 5] += 0.25
+    n = 2 * 3 * 10 * 8
+    assert detail_loss(pred, target).item() == pytest.approx((4 + 4) * 0.25 / n, rel=1e-5)
+    # masked: only pixels with a fully valid 3x3 neighbourhood count
+    mask = torch.ones(2, 12, 10)
+    mask[0, 4, 5] = 0  # (4, 5) is next to the raised pixel: (5, 5)'s and its neighbours' windows go
+    got = detail_loss(pred, target, mask)
+    valid = -F.max_pool2d(-mask[:, None], 3, stride=1)
+    assert valid[0, 0, 4, 4] == 0 and valid[0, 0, 3, 4] == 0  # windows around (4, 5) ...
+    assert got.item() == pytest.approx(1 * 0.25 / (3 * valid.sum().item()), rel=1e-5)  # ... leave (6, 5) only
+    with pytest.raises(InputError):
+        detail_loss(pred, target[:, :, :-1])
+
+
+def test_detail_loss_charges_a_blur_and_has_gradients():
+    g = torch.Generator().manual_seed(1)
+    target = (torch.rand(1, 3, 32, 32, generator=g) > 0.5).float()  # sharp strokes
+    blurred = F.avg_pool2d(target, 3, stride=1, padding=1, count_include_pad=False)
+    pred = blurred.clone().requires_grad_(True)
+    loss = detail_loss(pred, target)
+    assert loss.item() > 0.5 * detail_loss(torch.full_like(target, 0.5), target).item()  # a blur keeps little detail
+    loss.backward()
+    assert torch.isfinite(pred.grad).all() and pred.grad.abs().sum() > 0
