@@ -43,6 +43,7 @@ from .geometry.camera import Cameras
 from .models.adaattn import blend
 from .models.checkpoint import Checkpoint, load_checkpoint
 from .models.colour_transfer import ColourTransfer, LabStats, lab_stats, mix_stats
+from .models.palette import Palette, apply_palette, fit_palette, palette_target
 from .models.style_features import StyleEncoder, StyleFeatures
 from .models.scene_geometry import SceneGeometry, prepare_geometry
 from .models.stylize3d import Stylize3DModel
@@ -68,6 +69,11 @@ class StylizeSettings:
             transform; ``models/decoder.py``): the frame is rasterized once, the U-Net decodes its features
             pooled to 1/s of the frame's size per side, and recolours the full-size detail colours.
         preview_decode_scale: the same for previews (default 1).
+        match_palette: True (default): after the model, one colour matrix, the same for every view, brings
+            the frames' L*a*b* statistics to the style's (by the strength; the frames' lightness contrast
+            never lowered: :mod:`~stylize3d_core.models.palette`), fitted once
+            per photo, style and strength on a small render of the photo's own view
+            (:mod:`~stylize3d_core.models.palette`). False: the model's colours as they are.
     """
 
     strength: float = 0.8
@@ -77,6 +83,7 @@ class StylizeSettings:
     final_points_per_pixel: Optional[float] = None
     decode_scale: int = 1
     preview_decode_scale: int = 1
+    match_palette: bool = True
 
     def __post_init__(self) -> None:
         for name in ("decode_scale", "preview_decode_scale"):
@@ -89,6 +96,8 @@ class StylizeSettings:
         check_range(self.preview_points_per_pixel, "preview_points_per_pixel", 0.5, 100.0)
         if self.final_points_per_pixel is not None:
             check_range(self.final_points_per_pixel, "final_points_per_pixel", 0.5, 100.0)
+        if not isinstance(self.match_palette, bool):
+            raise InputError("match_palette", f"must be True or False, got {self.match_palette!r}")
 
 
 def style_tensor(style_rgb: np.ndarray, name: str = "style image") -> torch.Tensor:
@@ -207,6 +216,8 @@ class Stylized3DPhoto:
         self._transfer: Optional[ColourTransfer] = None  # the points' colours, ready to recolour
         self._mix = 0.0
         self._dense: Optional[torch.Tensor] = None  # (N, Cr) in self._order
+        self._palette_target: Optional[LabStats] = None  # what the palette map aims at (set with the dense features)
+        self._palette: Optional[Palette] = None  # fitted at the first render after a style/strength change
         self._strength = settings.strength
         self.timings.update({"geometry": t1 - t0, "encode": t2 - t1})
 
@@ -287,16 +298,41 @@ class Stylized3DPhoto:
             else:
                 sparse = blend(self._content, stylized, self._strength)
                 if self.model.config.detail_transfer and stats is not None:
-                    if self._transfer is None:
-                        self._transfer = ColourTransfer(self._in_order.rgb)
-                    colours = self._transfer(stats, self._strength)
+                    colours = self._colour_transfer()(stats, self._strength)
+            target = None
+            if stylized is not None and self._strength > 0.0 and stats is not None and self.settings.match_palette:
+                target = palette_target(self._colour_transfer().stats, stats, self._strength)
             dense = self.model.dense_features(sparse, self._in_order, colours)  # (N, Cr), in self._order
             if not torch.isfinite(dense.sum()) and not torch.isfinite(dense).all():
                 raise InputError(self._checkpoint_name, "its weights make NaN or infinite features on this photo "
                                  "(the weights are finite but far too large: a diverged or corrupt checkpoint)")
             # float32 whatever the autocast dtype (bfloat16 under torch.autocast): the rasterizer takes float32
             self._dense = dense.float().contiguous()
+        self._palette_target, self._palette = target, None
         self.timings["upsample"] = time.perf_counter() - t0
+
+    def _colour_transfer(self) -> ColourTransfer:
+        if self._transfer is None:
+            self._transfer = ColourTransfer(self._in_order.rgb)
+        return self._transfer
+
+    PALETTE_FIT_SIZE = 160
+    """Long side (px) of the photo's own view rendered to fit the palette map."""
+
+    def _update_palette(self, should_stop: Optional[Callable[[], bool]]) -> None:
+        t0 = time.perf_counter()
+        h, w = self.photo.size
+        scale = self.PALETTE_FIT_SIZE / max(h, w)
+        fh, fw = max(8, round(h * scale)), max(8, round(w * scale))
+        own = Cameras.identity(self.photo.fov_y_deg)
+        rgb = self._render_model(own, fh, fw, preview=True, should_stop=should_stop)
+        self._palette = fit_palette(rgb.permute(1, 2, 0).numpy(), self._palette_target)
+        self.timings["palette"] = time.perf_counter() - t0
+
+    @property
+    def palette(self) -> Optional[Palette]:
+        """The palette map of the current style and strength (None: none applies, or not fitted yet)."""
+        return self._palette
 
     def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False,
                should_stop: Optional[Callable[[], bool]] = None) -> np.ndarray:
@@ -311,6 +347,16 @@ class Stylized3DPhoto:
         """
         if self._dense is None:  # upsampled lazily: a style set right after construction is not done twice
             self._update_dense()
+        if self._palette_target is not None and self._palette is None:
+            self._update_palette(should_stop)
+        rgb = self._render_model(camera, height, width, preview=preview, should_stop=should_stop)
+        if self._palette is not None:
+            rgb = apply_palette(rgb, self._palette.matrix)
+        return rgb.permute(1, 2, 0).contiguous().numpy()
+
+    def _render_model(self, camera: Cameras, height: int, width: int, *, preview: bool,
+                      should_stop: Optional[Callable[[], bool]]) -> torch.Tensor:
+        """The model's view (3, H, W) float32 in [0, 1], before the palette map."""
         n = self.num_points
         if preview:
             ss, scale, per_pixel = 1, self.settings.preview_decode_scale, self.settings.preview_points_per_pixel
@@ -327,8 +373,7 @@ class Stylized3DPhoto:
                 raise RenderInterrupted("render stopped before rasterizing")
             rgb, _ = self.model.render_view(self._dense[:keep], self._xyz[:keep], camera, height, width,
                                             supersample=ss, should_stop=should_stop, **split)
-            rgb = torch.nan_to_num(rgb.float(), nan=0.0).clamp_(0.0, 1.0)  # float32 after a bfloat16 autocast
-        return rgb.permute(1, 2, 0).contiguous().numpy()
+            return torch.nan_to_num(rgb.float(), nan=0.0).clamp_(0.0, 1.0)  # float32 after a bfloat16 autocast
 
     def frames(self, cameras: Cameras, height: int, width: int) -> Iterator[np.ndarray]:
         """Lazily render one full-quality frame per camera."""

@@ -260,3 +260,38 @@ def test_detail_transfer_moves_the_frame_to_the_style_colours(stylized):
     finally:
         stylized.set_strength(1.0)
     assert full < 0.25 * far and full < half < far  # not all the way: saturated reds out of gamut lose chroma
+
+
+def test_palette_map_is_one_colour_matrix_for_every_view(stylized):
+    from stylize3d_core.models.checkpoint import Checkpoint
+    from stylize3d_core.models.palette import apply_palette
+
+    p = stylized.photo
+    g = np.random.default_rng(5)
+    style = np.kron(g.random((4, 4, 3)), np.ones((8, 8, 1))).astype(np.float32) * 0.6
+    checkpoint = Checkpoint(stylized.model, 2, {})
+    on = Stylized3DPhoto(p, checkpoint, StylizeSettings(strength=1.0))
+    off = Stylized3DPhoto(p, checkpoint, StylizeSettings(strength=1.0, match_palette=False))
+    for s in (on, off):
+        s.set_style(style)
+    moved = np.eye(4)
+    moved[0, 3] = 0.05
+    cams = Cameras.create(np.stack([np.eye(4), moved]), p.fov_y_deg)
+    a0, a1 = on.render(cams[0], 48, 64), on.render(cams[1], 48, 64)
+    pal = on.palette
+    assert pal is not None and off.palette is None
+    b0, b1 = off.render(cams[0], 48, 64), off.render(cams[1], 48, 64)
+    assert on.palette is pal  # fitted once, used for every view
+    for a, b in ((a0, b0), (a1, b1)):
+        want = apply_palette(torch.from_numpy(b).permute(2, 0, 1), pal.matrix).permute(1, 2, 0).numpy()
+        assert np.abs(a - want).max() < 1e-5
+    assert np.abs(a0 - b0).max() > 0.01  # it did recolour
+    on.set_strength(0.5)
+    on.render(cams[0], 24, 32, preview=True)
+    assert on.palette is not None and not np.array_equal(on.palette.matrix, pal.matrix)  # refitted
+    on.set_strength(0.0)
+    off.set_strength(0.0)
+    assert np.array_equal(on.render(cams[0], 48, 64), off.render(cams[0], 48, 64))  # strength 0: no palette
+    assert on.palette is None
+    with pytest.raises(InputError):
+        StylizeSettings(match_palette="yes")
