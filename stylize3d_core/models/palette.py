@@ -130,12 +130,12 @@ def fit_palette(pixels: np.ndarray, target: LabStats, *, max_gain: float = MAX_P
 
 
 def apply_palette(rgb: torch.Tensor, matrix: np.ndarray) -> torch.Tensor:
-    """``rgb`` (3, H, W) float in [0, 1] through a palette ``matrix`` (4, 3): a new (3, H, W) tensor in [0, 1]."""
+    """``rgb`` (3, H, W) float in [0, 1] through a palette ``matrix`` (4, 3): a new (3, H, W) float32 tensor in [0, 1]."""
     if rgb.dim() != 3 or rgb.shape[0] != 3:
         raise InputError("rgb", f"expected a (3, H, W) image, got {tuple(rgb.shape)}")
-    m = torch.as_tensor(matrix, dtype=rgb.dtype, device=rgb.device)
-    flat = rgb.reshape(3, -1)
-    out = torch.addmm(m[3][:, None], m[:3].T, flat)  # (3, H*W): M^T [rgb, 1]
+    m = torch.as_tensor(matrix, dtype=torch.float32, device=rgb.device)
+    with torch.autocast(device_type=rgb.device.type, enabled=False):  # float32 under a bfloat16 autocast too
+        out = torch.addmm(m[3][:, None], m[:3].T, rgb.float().reshape(3, -1))  # (3, H*W): M^T [rgb, 1]
     return out.clamp_(0.0, 1.0).reshape(rgb.shape)
 
 

@@ -88,3 +88,11 @@ def test_a_flatter_style_keeps_the_lightness_contrast():
     assert abs(kept.after.mean[0] - flat.mean[0]) < 0.5 and abs(kept.after.mean[1] - flat.mean[1]) < 0.5
     lowered = fit_palette(img, flat, min_lightness_gain=0.0)
     assert abs(lowered.after.std[0] - flat.std[0]) < 0.5
+
+
+def test_apply_is_float32_under_a_bfloat16_autocast():
+    m = np.vstack([np.eye(3) * 0.5, np.full((1, 3), 0.25)]).astype(np.float32)
+    x = torch.rand(3, 4, 5)
+    with torch.autocast(device_type="cpu", dtype=torch.bfloat16):
+        out = apply_palette(x, m)
+    assert out.dtype == torch.float32 and torch.allclose(out, 0.5 * x + 0.25)
