@@ -122,3 +122,23 @@ def test_prepare_geometry_rejects_bad_input(cloud, cloud_size):
         prepare_geometry(pts.xyz, pts.rgb, fov, (0, 36))
     with pytest.raises(InputError, match="NeighbourhoodConfig"):
         build_hierarchy(pts.xyz, "paper")
+
+
+def test_build_hierarchy_validates_once_at_the_top(cloud, cloud_size):
+    # the levels are searched without re-checking their points (they are the validated input or rows of
+    # it): a NaN or infinity in the input is still refused by name, and a float64 input gives the float32
+    # input's hierarchy (one cast up front)
+    (pts, fov), size = cloud, cloud_size
+    xyz = to_ndc(pts.xyz, ndc_params(pts.xyz[:, 2], fov, size[1] / size[0]))  # (N, 3)
+    cfg = NeighbourhoodConfig(k=8, stem_radius=0.1, stage_radii=((0.1, 0.2),), downsample=(4,))
+    for bad in (float("nan"), float("inf")):
+        broken = xyz.clone()
+        broken[len(xyz) // 2, 1] = bad
+        with pytest.raises(InputError, match="xyz_ndc.*NaN or infinite"):
+            build_hierarchy(broken, cfg)
+    with pytest.raises(InputError, match="xyz_ndc.*floating-point"):
+        build_hierarchy(xyz.round().long(), cfg)
+    a, b = build_hierarchy(xyz, cfg), build_hierarchy(xyz.double(), cfg)
+    for x, y in zip((a.stem_neighbours, *a.sample_idx, *a.down_neighbours, *a.same_neighbours, *a.xyz),
+                    (b.stem_neighbours, *b.sample_idx, *b.down_neighbours, *b.same_neighbours, *b.xyz)):
+        assert torch.equal(x, y)
