@@ -174,6 +174,16 @@ def fit_line(text: str, width_px: float, em: float) -> str:
     return t if len(t) <= n else t[: n - 3].rstrip() + "..."
 
 
+
+def set_if_changed(widget, attr: str, value) -> bool:
+    """Set ``widget.attr = value`` only when it differs (returns whether it was set): the status lines are
+    refreshed while dragging, mostly with the same text, and a label's new text can cost the GUI thread a
+    relayout; an unchanged widget is left alone."""
+    if getattr(widget, attr) == value:
+        return False
+    setattr(widget, attr, value)
+    return True
+
 class Panel:
     """The side panel, status area and help overlay of the viewer window.
 
@@ -389,8 +399,9 @@ class Panel:
         """Show ``text`` on ``label`` of the status area as one line (:func:`fit_line`); the whole text is its
         tooltip when cut."""
         full = str(text)
-        label.text = fit_line(full, (self.WIDTH_EM - 1.5) * self.em, self.em)
-        label.tooltip = full if label.text != full else ""
+        line = fit_line(full, (self.WIDTH_EM - 1.5) * self.em, self.em)
+        set_if_changed(label, "text", line)
+        set_if_changed(label, "tooltip", full if line != full else "")
 
     def set_status(self, text: str) -> None:
         """The status line: ``text`` (kept whole in :attr:`status_text`), shown as one line."""

@@ -264,3 +264,54 @@ def test_status_lines_fit_one_line():
     assert len(cut) == 40 and cut.endswith("...") and long.startswith(cut[:-3])
     assert fit_line("two\nlines", width, em) == "two lines"  # a newline would wrap it too
     assert len(fit_line(long, 1.0, em)) == 8  # never less than a few characters
+
+
+class _CountingLabel:
+    """A stand-in for gui.Label that counts the writes to its text and tooltip."""
+
+    def __init__(self) -> None:
+        self._text, self._tooltip, self.writes = "", "", []
+
+    @property
+    def text(self) -> str:
+        return self._text
+
+    @text.setter
+    def text(self, value: str) -> None:
+        self.writes.append(("text", value))
+        self._text = value
+
+    @property
+    def tooltip(self) -> str:
+        return self._tooltip
+
+    @tooltip.setter
+    def tooltip(self, value: str) -> None:
+        self.writes.append(("tooltip", value))
+        self._tooltip = value
+
+
+def test_status_line_leaves_unchanged_labels_alone():
+    from types import SimpleNamespace
+
+    from app.viewer.panel import Panel, fit_line, set_if_changed
+
+    label = _CountingLabel()
+    assert set_if_changed(label, "text", "a") and not set_if_changed(label, "text", "a")
+    assert label.writes == [("text", "a")]
+
+    panel = SimpleNamespace(WIDTH_EM=Panel.WIDTH_EM, em=16.0)
+    label = _CountingLabel()
+    Panel.set_line(panel, label, "preview 192px 40ms")
+    assert label.text == "preview 192px 40ms" and label.tooltip == ""
+    assert label.writes == [("text", "preview 192px 40ms")]  # the tooltip was already empty
+    Panel.set_line(panel, label, "preview 192px 40ms")  # the same text again (every frame while dragging)
+    assert label.writes == [("text", "preview 192px 40ms")]
+    long = "x" * 400
+    Panel.set_line(panel, label, long)
+    cut = fit_line(long, (Panel.WIDTH_EM - 1.5) * 16.0, 16.0)
+    assert label.text == cut != long and label.tooltip == long and len(label.writes) == 3
+    Panel.set_line(panel, label, long)
+    assert len(label.writes) == 3
+    Panel.set_line(panel, label, "short")
+    assert label.text == "short" and label.tooltip == "" and len(label.writes) == 5
