@@ -141,9 +141,17 @@ class _Worker:
             proc.wait()
 
     def stop(self) -> None:
-        """End the process (the next large sampling starts a new one)."""
-        with self._lock:
-            self._stop()
+        """End the process (the next large sampling starts a new one).
+
+        If a sampling is under way in another thread (a daemon thread at interpreter exit), the process is
+        killed rather than waited for: that thread's sampling then falls back to its own process."""
+        if self._lock.acquire(timeout=0.5):
+            try:
+                self._stop()
+            finally:
+                self._lock.release()
+        elif self._proc is not None:
+            self._proc.kill()
 
 
 _WORKER = _Worker()

@@ -171,3 +171,15 @@ def test_worker_failure_falls_back_to_this_process(fps_worker, surface_cloud, tm
     assert not fps_worker.enabled  # the rest of the session samples here
     ref = farthest_point_sample_reference(xyz, 500, first=int(a[0]))
     assert torch.equal(a, ref)
+
+
+def test_stop_while_a_sampling_holds_the_worker_kills_it(fps_worker, surface_cloud):
+    _sampling.start_fps_process()
+    proc = fps_worker._proc
+    with fps_worker._lock:  # as a daemon thread in the middle of a sampling at interpreter exit
+        fps_worker.stop()  # returns (after a short wait) instead of blocking
+        assert proc.wait(timeout=5) is not None
+    xyz = surface_cloud(200, 180)
+    a = farthest_point_sample(xyz, 300)  # a new worker
+    assert fps_worker.enabled and fps_worker._proc is not proc
+    assert torch.equal(a, farthest_point_sample_reference(xyz, 300, first=int(a[0])))
