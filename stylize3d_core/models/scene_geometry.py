@@ -29,7 +29,6 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any, Mapping, NamedTuple, Tuple
 
-import numpy as np
 import torch
 
 from ..checks import check_finite, check_shape
@@ -231,10 +230,8 @@ def _build_hierarchy(
         for s in range(config.num_stages + 1):
             cur = levels[-1]  # (n, 3)
             fps = pool.submit(_fps_level, cur, config.downsample[s], config.fps_start) if s < config.num_stages else None
-            # ``cur`` is xyz_ndc (validated above) or rows of it: no second finiteness check of the
-            # same points (the tree's own float32 array is the query, as KNNIndex.knn(cur) would copy).
-            index = KNNIndex._from_array(np.ascontiguousarray(cur.numpy(), dtype=np.float32))
-            self_knn = index._search(index._src, k)  # (n, k) of the level among itself
+            index = KNNIndex(cur)
+            self_knn = index.self_knn(k)  # (n, k) of the level among itself
             balls = ball_from_knn(self_knn, radius, index.num_points).idx  # (n, k)
             if s == 0:
                 stem = balls

@@ -123,6 +123,11 @@ class KNNIndex:
         """The ``k`` nearest source points of each ``query`` point (M, 3): as :func:`knn`."""
         return self._search(_as_f32_array(query, "query", allow_empty=True), check_count(k, "k", 1))
 
+    def self_knn(self, k: int) -> KNNResult:
+        """The ``k`` nearest source points of every source point: ``knn(source, k)`` without checking and
+        copying the source a second time (the tree's own array is the query)."""
+        return self._search(self._src, check_count(k, "k", 1))
+
     def _search(self, qry: np.ndarray, k: int) -> KNNResult:
         """k-NN of validated (M, 3) float32 queries, ``k`` >= 1."""
         if len(qry) == 0:

@@ -124,9 +124,9 @@ def test_prepare_geometry_rejects_bad_input(cloud, cloud_size):
         build_hierarchy(pts.xyz, "paper")
 
 
-def test_build_hierarchy_validates_once_at_the_top(cloud, cloud_size):
-    # the levels are searched without re-checking their points (they are the validated input or rows of
-    # it): a NaN or infinity in the input is still refused by name, and a float64 input gives the float32
+def test_build_hierarchy_validates_at_the_top(cloud, cloud_size):
+    # each level's search uses its tree's own array as the query (KNNIndex.self_knn, no second check):
+    # a NaN or infinity in the input is still refused by name, and a float64 input gives the float32
     # input's hierarchy (one cast up front)
     (pts, fov), size = cloud, cloud_size
     xyz = to_ndc(pts.xyz, ndc_params(pts.xyz[:, 2], fov, size[1] / size[0]))  # (N, 3)

@@ -161,3 +161,14 @@ def test_knn_in_chunks_of_queries_is_the_same_search(monkeypatch):
     monkeypatch.setattr(neighbours, "QUERY_CHUNK_RESULTS", 50)  # 7 queries per call, a ragged last chunk
     parts = index.knn(pts, 7)
     assert torch.equal(parts.idx, whole.idx) and torch.equal(parts.sq_dist, whole.sq_dist)
+
+
+def test_self_knn_is_the_search_of_the_source_among_itself(surface_cloud):
+    src = surface_cloud(30, 40, jitter=0.5)
+    index = KNNIndex(src)
+    a, b = index.self_knn(6), index.knn(src, 6)
+    assert torch.equal(a.idx, b.idx) and torch.equal(a.sq_dist, b.sq_dist)
+    ref = knn_reference(src, src, 6)
+    torch.testing.assert_close(a.sq_dist.double(), ref.sq_dist, rtol=1e-5, atol=1e-7)
+    with pytest.raises(InputError):
+        index.self_knn(0)
