@@ -158,7 +158,10 @@ class ColourTransfer:
         if strength == 0.0 or self._lab.shape[0] == 0:
             return self.rgb
         c = self.stats
-        gain, target = self._gain_and_mean(style, strength)
+        ratio = np.clip(np.nan_to_num(style.std / (c.std + _EPS), nan=1.0), 0.0, MAX_GAIN)
+        ratio[0] = max(ratio[0], MIN_LIGHTNESS_GAIN)
+        gain = 1.0 + strength * (ratio - 1.0)
+        target = c.mean + strength * (np.nan_to_num(style.mean, nan=0.0) - c.mean)
         out = (self._lab - c.mean) * gain.astype(np.float32) + target.astype(np.float32)
         out[:, 0] = out[:, 0].clip(0.0, 100.0)
         out[:, 1:] = out[:, 1:].clip(-127.0, 127.0)
@@ -166,22 +169,6 @@ class ColourTransfer:
         back = cv2.cvtColor(out.astype(np.float32).reshape(-1, 1, 3), cv2.COLOR_Lab2RGB).reshape(-1, 3)
         back = np.nan_to_num(back, nan=0.0).clip(0.0, 1.0)
         return torch.from_numpy(back).to(self.rgb.device)
-
-
-    def _gain_and_mean(self, style: LabStats, strength: float):
-        c = self.stats
-        ratio = np.clip(np.nan_to_num(style.std / (c.std + _EPS), nan=1.0), 0.0, MAX_GAIN)
-        ratio[0] = max(ratio[0], MIN_LIGHTNESS_GAIN)
-        gain = 1.0 + strength * (ratio - 1.0)
-        target = c.mean + strength * (np.nan_to_num(style.mean, nan=0.0) - c.mean)
-        return gain, target
-
-    def target_stats(self, style: LabStats, strength: float = 1.0) -> LabStats:
-        """The statistics the transferred colours aim at (before clipping and the gamut map): the
-        photo's, moved by ``strength`` towards the style's, the lightness contrast never reduced."""
-        strength = check_range(strength, "strength", 0.0, 1.0)
-        gain, mean = self._gain_and_mean(style, strength)
-        return LabStats(mean.astype(np.float32), (self.stats.std * gain).astype(np.float32))
 
 
 def transfer_colours(rgb: torch.Tensor, style: LabStats, strength: float = 1.0) -> torch.Tensor:

@@ -34,7 +34,7 @@ import torch
 
 from ..checks import check_range
 from ..errors import InputError
-from .colour_transfer import LabStats, gamut_map
+from .colour_transfer import LabStats, _to_lab, gamut_map
 
 MAX_PALETTE_GAIN = 6.0
 """Largest (and 1 / smallest) per-channel std gain of the correction."""
@@ -70,10 +70,6 @@ def palette_target(photo: LabStats, style: LabStats, strength: float) -> LabStat
     return LabStats((p_mean + s * (s_mean - p_mean)).astype(np.float32), (p_std + s * (s_std - p_std)).astype(np.float32))
 
 
-def _lab(rgb: np.ndarray) -> np.ndarray:
-    return cv2.cvtColor(np.ascontiguousarray(rgb, np.float32).reshape(-1, 1, 3), cv2.COLOR_RGB2Lab).reshape(-1, 3)
-
-
 def _stats(lab: np.ndarray) -> LabStats:
     return LabStats(lab.mean(0, dtype=np.float64).astype(np.float32), lab.std(0, dtype=np.float64).astype(np.float32))
 
@@ -103,16 +99,16 @@ def fit_palette(pixels: np.ndarray, target: LabStats, *, max_gain: float = MAX_P
     t_mean, t_std = np.asarray(target.mean, np.float64), np.asarray(target.std, np.float64)
     if x.shape[0] == 0 or not (np.isfinite(t_mean).all() and np.isfinite(t_std).all()):
         empty = LabStats(np.zeros(3, np.float32), np.zeros(3, np.float32))
-        before = _stats(_lab(x)) if x.shape[0] else empty
+        before = _stats(_to_lab(x)) if x.shape[0] else empty
         return Palette(identity, before, before, target)
     x1 = np.hstack([x, np.ones((x.shape[0], 1), np.float32)]).astype(np.float64)  # (n, 4)
-    before = _stats(_lab(x))
+    before = _stats(_to_lab(x))
     gram = x1.T @ x1
     ridge = 1e-4 * x.shape[0]  # towards the identity: a flat image (a singular fit) keeps its colours
     matrix = identity.astype(np.float64)
     for _ in range(passes):
         cur = _apply_np(x1, matrix).astype(np.float32)
-        lab = _lab(cur)
+        lab = _to_lab(cur)
         s = _stats(lab)
         gain = np.clip(t_std / (s.std.astype(np.float64) + _EPS), 1.0 / max_gain, max_gain)
         gain[0] = max(gain[0], min_lightness_gain)
@@ -125,7 +121,7 @@ def fit_palette(pixels: np.ndarray, target: LabStats, *, max_gain: float = MAX_P
     if not np.isfinite(matrix).all():
         return Palette(identity, before, before, target)
     matrix = matrix.astype(np.float32)
-    after = _stats(_lab(_apply_np(x1.astype(np.float32), matrix)))
+    after = _stats(_to_lab(_apply_np(x1.astype(np.float32), matrix)))
     return Palette(matrix, before, after, target)
 
 
