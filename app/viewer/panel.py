@@ -174,7 +174,6 @@ def fit_line(text: str, width_px: float, em: float) -> str:
     return t if len(t) <= n else t[: n - 3].rstrip() + "..."
 
 
-
 def set_if_changed(widget, attr: str, value) -> bool:
     """Set ``widget.attr = value`` only when it differs (returns whether it was set): the status lines are
     refreshed while dragging, mostly with the same text, and a label's new text can cost the GUI thread a
@@ -183,6 +182,7 @@ def set_if_changed(widget, attr: str, value) -> bool:
         return False
     setattr(widget, attr, value)
     return True
+
 
 class Panel:
     """The side panel, status area and help overlay of the viewer window.

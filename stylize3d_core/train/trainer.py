@@ -256,7 +256,7 @@ class TrainStep(nn.Module):
                     3 * t_mask.sum()).clamp(min=1.0)
                 terms["teacher_perceptual"] = w.teacher_perceptual * self.perceptual(pred, t_target)
                 if w.teacher_detail:
-                    terms["teacher_detail"] = w.teacher_detail * detail_loss(pred, t_target, teacher[1].to(pred.device))
+                    terms["teacher_detail"] = w.teacher_detail * detail_loss(pred, t_target, t_mask[:, 0])
         n = geom.xyz.shape[0]
         pick = torch.randperm(n, generator=generator)[: self.consistency_points]
         weight = w.consistency if style is None else w.consistency_stylized

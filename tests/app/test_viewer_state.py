@@ -267,28 +267,14 @@ def test_status_lines_fit_one_line():
 
 
 class _CountingLabel:
-    """A stand-in for gui.Label that counts the writes to its text and tooltip."""
+    """A stand-in for gui.Label that records every attribute write (its text and tooltip)."""
 
     def __init__(self) -> None:
-        self._text, self._tooltip, self.writes = "", "", []
+        self.__dict__.update(text="", tooltip="", writes=[])
 
-    @property
-    def text(self) -> str:
-        return self._text
-
-    @text.setter
-    def text(self, value: str) -> None:
-        self.writes.append(("text", value))
-        self._text = value
-
-    @property
-    def tooltip(self) -> str:
-        return self._tooltip
-
-    @tooltip.setter
-    def tooltip(self, value: str) -> None:
-        self.writes.append(("tooltip", value))
-        self._tooltip = value
+    def __setattr__(self, name: str, value) -> None:
+        self.writes.append((name, value))
+        super().__setattr__(name, value)
 
 
 def test_status_line_leaves_unchanged_labels_alone():
