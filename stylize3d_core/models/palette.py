@@ -18,9 +18,9 @@ frames). Palette matching corrects that after the model:
    their corrected colours by least squares (twice: the second pass corrects what
    the first left of the L*a*b* statistics).
 
-Every frame is then ``clamp([rgb, 1] M)``: a global colour map, so the views stay
-exactly as consistent as the model made them, and it costs one small matrix
-product per frame. An affine RGB map cannot follow every bend of the L*a*b*
+Every frame is then ``clamp([rgb, 1] M)``: a global colour map, which adds no
+view-dependent change of its own (it scales the differences the model's views
+already have by its gain), and it costs one small matrix product per frame. An affine RGB map cannot follow every bend of the L*a*b*
 correction; :func:`fit_palette` reports the statistics it reaches.
 """
 
