@@ -157,7 +157,7 @@ def trajectory_extreme_cameras(fov_y_deg: float = DEFAULT_FOV_Y_DEG,
 def _project(points: np.ndarray, world_to_cam: np.ndarray, focal: np.ndarray,
              centre: Tuple[float, float]) -> Tuple[np.ndarray, np.ndarray]:
     """Points (N, 3) seen by K cameras: pixel coordinates (K, N, 2) and depths (K, N)."""
-    p = np.einsum("kij,nj->kni", world_to_cam[:, :3, :3], points) + world_to_cam[:, None, :3, 3]  # (K, N, 3)
+    p = np.matmul(points, world_to_cam[:, :3, :3].transpose(0, 2, 1)) + world_to_cam[:, None, :3, 3]  # (K, N, 3)
     z = np.maximum(p[..., 2], 1e-9)
     uv = p[..., :2] / z[..., None] * focal[:, None, None] + np.asarray(centre)
     return uv, p[..., 2]

@@ -235,10 +235,17 @@ def local_linear_fit(
         damp: (one, or one per channel) scale the gradient by the fit's R^2 (the share of the values' local variance
             the plane explains), from 0 at ``_R2_NOISE`` to 1 at ``_R2_SMOOTH``: noise-like
             texture gets no gradient, smooth shading keeps it.
-        where: (H, W) bool, the pixels whose fit is wanted (all by default): the moments are
-            blurred over the whole image, the fit is solved there only (0 elsewhere).
+        where: (H, W) bool, the pixels whose fit is wanted (all by default; 0 elsewhere). Few
+            of them (a window of taps each costs less than blurring the image): the moments are
+            summed over each one's window (:func:`_window_moments`, the same Gaussian taps);
+            else they are blurred over the whole image and the fit is solved there only.
     """
     h, w = weight.shape
+    if where is not None:
+        n = int(np.count_nonzero(where))
+        taps = _gaussian_taps(sigma).size ** 2
+        if n * taps <= _WINDOW_COST * h * w:
+            return _sparse_fit(values, weight, sigma, ridge, damp, where)
     wt = weight.astype(np.float32)
     v = values.astype(np.float32)
     y, x = np.mgrid[:h, :w].astype(np.float32)
@@ -280,6 +287,90 @@ def local_linear_fit(
     for f in fields:
         out = np.zeros((h, w) + f.shape[1:], f.dtype)
         out[idx] = f
+        full.append(out)
+    return LinearFit(*full)
+
+
+_WINDOW_COST = 2
+"""The fit sums its windows directly when that touches at most this many values per image pixel
+(it blurs ~22 image-sized channels otherwise)."""
+
+
+def _gaussian_taps(sigma: float) -> np.ndarray:
+    """The 1D kernel ``cv2.GaussianBlur`` uses for a float image at ``sigma`` (ksize from sigma)."""
+    ksize = int(round(sigma * 4 * 2 + 1)) | 1
+    return cv2.getGaussianKernel(ksize, sigma, cv2.CV_64F)[:, 0]
+
+
+_WINDOW_CHUNK = 512
+"""Pixels whose windows are summed at once (the temporaries stay in the cache)."""
+
+
+def _sparse_fit(
+    values: np.ndarray, weight: np.ndarray, sigma: float, ridge: Union[float, Sequence[float]],
+    damp: Union[bool, Sequence[bool]], where: np.ndarray,
+) -> LinearFit:
+    """:func:`local_linear_fit` at the pixels of ``where`` by direct sums over their windows.
+
+    The window is ``cv2.GaussianBlur``'s kernel at ``sigma`` with zeros beyond the image
+    (``BORDER_CONSTANT``), so the moments are the blurred ones; they are taken about each
+    pixel (float32 sums of at most a few hundred taps), so the fit is the same up to rounding.
+    """
+    h, w = weight.shape
+    c = values.shape[-1]
+    g1 = _gaussian_taps(sigma)
+    r = g1.size // 2
+    off = np.arange(-r, r + 1, dtype=np.int32)
+    dyi, dxi = (a.ravel() for a in np.meshgrid(off, off, indexing="ij"))  # (T,) tap offsets
+    dx, dy = dxi.astype(np.float32), dyi.astype(np.float32)
+    kern = np.outer(g1, g1).ravel().astype(np.float32)  # (T,)
+    basis = np.stack([np.ones_like(dx), dx, dy, dx * dx, dx * dy, dy * dy], axis=1)  # (T, 6)
+    wflat = weight.astype(np.float32, copy=False).ravel()
+    vflat = values.astype(np.float32, copy=False).reshape(h * w, c)
+    rows, cols = np.nonzero(where)
+    n = rows.size
+    pos = np.empty((n, 6), np.float64)  # sums of w, w dx, w dy, w dx^2, w dx dy, w dy^2
+    val = np.empty((n, 4, c), np.float64)  # sums of w v, w v dx, w v dy, w v^2
+    for a in range(0, n, _WINDOW_CHUNK):
+        b = min(n, a + _WINDOW_CHUNK)
+        rr = rows[a:b, None].astype(np.int32) + dyi[None]  # (B, T)
+        cc = cols[a:b, None].astype(np.int32) + dxi[None]
+        inside = (rr >= 0) & (rr < h) & (cc >= 0) & (cc < w)  # zeros beyond the image
+        flat = np.clip(rr, 0, h - 1) * w + np.clip(cc, 0, w - 1)  # np.take: far faster than 2D indexing
+        k = kern[None] * np.where(inside, np.take(wflat, flat), np.float32(0.0))  # (B, T) tap weights
+        vq = np.take(vflat, flat, axis=0)  # (B, T, C)
+        pos[a:b] = k @ basis
+        kk = k[:, None, :] * basis[None, :, :3].transpose(0, 2, 1)  # (B, 3, T): k, k dx, k dy
+        val[a:b, :3] = np.matmul(kk, vq)
+        np.square(vq, out=vq)
+        val[a:b, 3] = np.matmul(k[:, None, :], vq)[:, 0]
+    s0 = pos[:, 0]
+    inv = 1.0 / np.maximum(s0, 1e-12)
+    ox, oy = pos[:, 1] * inv, pos[:, 2] * inv  # the centroid's offset from the pixel
+    cxx = pos[:, 3] * inv - ox * ox
+    cxy = pos[:, 4] * inv - ox * oy
+    cyy = pos[:, 5] * inv - oy * oy
+    mv = val[:, 0] * inv[:, None]  # (N, C)
+    cvx = val[:, 1] * inv[:, None] - mv * ox[:, None]
+    cvy = val[:, 2] * inv[:, None] - mv * oy[:, None]
+    lam = np.broadcast_to(np.asarray(ridge, np.float64), (c,)) * sigma * sigma
+    a_, b_, d_ = cxx[:, None] + lam, cxy[:, None], cyy[:, None] + lam  # (N, C)
+    det = np.maximum(a_ * d_ - b_ * b_, 1e-12)
+    gx = (d_ * cvx - b_ * cvy) / det
+    gy = (a_ * cvy - b_ * cvx) / det
+    damped = np.broadcast_to(np.asarray(damp, bool), (c,))
+    keep = np.ones_like(gx)
+    if damped.any():
+        var = val[:, 3] * inv[:, None] - mv * mv
+        r2 = (gx * cvx + gy * cvy) / np.maximum(var, 1e-12)
+        keep = np.clip((r2 - _R2_NOISE) / (_R2_SMOOTH - _R2_NOISE), 0.0, 1.0)
+        keep[:, ~damped] = 1.0
+        gx, gy = gx * keep, gy * keep
+    fields = (mv, np.stack([cols + ox, rows + oy], axis=-1), np.stack([gx, gy], axis=-1), s0, keep)
+    full = []
+    for f in fields:
+        out = np.zeros((h, w) + f.shape[1:], np.float64)
+        out[rows, cols] = f
         full.append(out)
     return LinearFit(*full)
 
@@ -345,23 +436,34 @@ def extrapolate(
     return out
 
 
-def scan_nearest(targets: np.ndarray) -> np.ndarray:
+def scan_nearest(targets: np.ndarray, where: Optional[np.ndarray] = None) -> np.ndarray:
     """For every pixel, the nearest True pixel of ``targets`` along its row and column, each way.
 
+    Args:
+        targets: (H, W) bool.
+        where: (H, W) bool, the pixels wanted (all by default).
     Returns:
         (4, H, W, 2) int64 (row, col) of the nearest target to the left, right, above and
-        below (the pixel itself when it is one); -1 where there is none that way.
+        below (the pixel itself when it is one); -1 where there is none that way. With
+        ``where``: (4, N, 2) for its N pixels in raster order.
     """
     h, w = targets.shape
-    rows = np.broadcast_to(np.arange(h)[:, None], (h, w))
-    cols = np.broadcast_to(np.arange(w)[None, :], (h, w))
-    out = np.full((4, h, w, 2), -1, np.int64)
+    cols = np.arange(w, dtype=np.int32)[None, :]
+    rows = np.arange(h, dtype=np.int32)[:, None]
     left = np.maximum.accumulate(np.where(targets, cols, -1), axis=1)
     right = np.minimum.accumulate(np.where(targets, cols, w)[:, ::-1], axis=1)[:, ::-1]
     up = np.maximum.accumulate(np.where(targets, rows, -1), axis=0)
     down = np.minimum.accumulate(np.where(targets, rows, h)[::-1], axis=0)[::-1]
+    if where is None:
+        pr, pc = np.broadcast_to(rows, (h, w)), np.broadcast_to(cols, (h, w))
+        pick = (slice(None), slice(None))
+    else:
+        pr, pc = np.nonzero(where)
+        pick = (pr, pc)
+    out = np.full((4,) + pr.shape + (2,), -1, np.int64)
     for k, (r, c, ok) in enumerate((
-        (rows, left, left >= 0), (rows, right, right < w), (up, cols, up >= 0), (down, cols, down < h)
+        (pr, left[pick], left[pick] >= 0), (pr, right[pick], right[pick] < w),
+        (up[pick], pc, up[pick] >= 0), (down[pick], pc, down[pick] < h),
     )):
         out[k, ..., 0] = np.where(ok, r, -1)
         out[k, ..., 1] = np.where(ok, c, -1)

@@ -51,8 +51,11 @@ Stage 3 of the pipeline (docs/architecture.md, "Pipeline stages"), after 3DPhoto
    is never changed**: the photo's pixels keep their colour and depth (the
    mixed pixels on the background side of a tear included), so the photo seen
    from its own camera stays the photo. Only padded boxes around clusters of
-   edges are processed. With no edge the step is skipped (``LDI.inpainted`` is
-   False).
+   edges are processed, and the fits are solved only at the sources some band
+   pixel continues (its nearest, and its nearest along its row and column: a
+   thin rim of the sources), where few, by summing their Gaussian windows
+   directly rather than blurring the box. With no edge the step is skipped
+   (``LDI.inpainted`` is False).
 6. **Border.** The canvas is extended by ``pad`` pixels on every side (step 4).
    Colour: push-pull continuation of the photo (blur grows with the distance
    from the photo, no mirrored seams). Depth: the push-pull continuation of
@@ -604,6 +607,10 @@ def _hidden_layer(
             source = ~band
         # every pixel takes the values of its nearest background source (no foreground can leak)
         nearest = nearest_index(source)  # (h, w)
+        scan = scan_nearest(source, where=band) if s.hidden_depth == "surface" else None  # (4, N, 2)
+        # the fits are continued only from the sources some band pixel takes: its nearest, and in
+        # "surface" mode the nearest along its row and column (a thin rim of the sources)
+        used = _used_sources(nearest, source, band, scan)
         srcw = source.astype(np.float32)
         lo = 0.5 * float(ndc[source].min())  # never much farther than anything seen
         want_nd, want_rgb = s.hidden_depth != "nearest", s.inpaint_method == "linear"
@@ -611,13 +618,13 @@ def _hidden_layer(
         if want_nd and want_rgb:  # one fit of the four channels (shared position moments)
             values = np.concatenate([ndc[..., None], rgbc], axis=2)
             both = local_linear_fit(values, srcw, s.fit_sigma, ridge=(_DEPTH_RIDGE,) + (_COLOUR_RIDGE,) * 3,
-                                    damp=(False, True, True, True), where=source)  # only sources are continued
-            both = anchored(both, values, where=source)
+                                    damp=(False, True, True, True), where=used)
+            both = anchored(both, values, where=used)
             nd_fit, col_fit = split_fit(both, slice(0, 1)), split_fit(both, slice(1, 4))
         elif want_nd:
-            nd_fit = local_linear_fit(ndc[..., None], srcw, s.fit_sigma, ridge=_DEPTH_RIDGE, where=source)
+            nd_fit = local_linear_fit(ndc[..., None], srcw, s.fit_sigma, ridge=_DEPTH_RIDGE, where=used)
         elif want_rgb:
-            col_fit = local_linear_fit(rgbc, srcw, s.fit_sigma, ridge=_COLOUR_RIDGE, damp=True, where=source)
+            col_fit = local_linear_fit(rgbc, srcw, s.fit_sigma, ridge=_COLOUR_RIDGE, damp=True, where=used)
         if nd_fit is not None:  # continue the background's local plane (nd is affine on it)
             bg_nd = np.maximum(extrapolate(nd_fit, nearest, source, _DEPTH_STEP * s.disparity_jump, band)[..., 0], lo)
             bg_nd = np.where(source, ndc, bg_nd)
@@ -625,7 +632,7 @@ def _hidden_layer(
             bg_nd = ndc[source][nearest]  # (h, w)
         chosen_rgb = None
         if s.hidden_depth == "surface":
-            bg_nd, chosen_rgb = _nearest_surface(nd_fit, col_fit, source, band, ndc, bg_nd, lo, s)
+            bg_nd, chosen_rgb = _nearest_surface(nd_fit, col_fit, source, band, ndc, bg_nd, lo, s, scan, nearest)
         # smooth the seams of that fill within band + sources (normalised convolution)
         weight = (band | source).astype(np.float32)
         sigma = min(_MAX_DEPTH_SIGMA, max(1.0, band_px / 8.0))
@@ -636,10 +643,11 @@ def _hidden_layer(
         # Layer 0 is never recoloured (the photo seen from its own camera stays the photo): the
         # background side's mixed pixels keep their colour there; the hidden layer is background-only.
         todo = band
-        if col_fit is not None:  # the background's colour and its gradient continued
+        if chosen_rgb is not None:  # chosen with the surface
+            colour = np.zeros(rgbc.shape, np.float32)
+            colour[band] = chosen_rgb
+        elif col_fit is not None:  # the background's colour and its gradient continued
             colour = np.clip(extrapolate(col_fit, nearest, source, s.max_colour_step, todo), 0.0, 1.0)
-            if chosen_rgb is not None:
-                colour[band] = chosen_rgb
         elif s.inpaint_method == "push_pull":  # a multi-scale blend of the background sources
             colour = push_pull(rgbc, source.astype(np.float32))
         else:
@@ -655,9 +663,24 @@ def _hidden_layer(
     return mask, out_rgb, out_nd
 
 
+def _used_sources(
+    nearest: np.ndarray, source: np.ndarray, band: np.ndarray, scan: Optional[np.ndarray]
+) -> np.ndarray:
+    """(h, w) bool: the sources a band pixel continues (its nearest; and its ``scan`` candidates,
+    (4, N, 2) for the band's N pixels in raster order, where given)."""
+    used = np.zeros_like(source)
+    tr, tc = np.nonzero(source)
+    k = nearest[band]
+    used[tr[k], tc[k]] = True
+    if scan is not None:
+        ok = scan[..., 0] >= 0
+        used[scan[..., 0][ok], scan[..., 1][ok]] = True
+    return used
+
+
 def _nearest_surface(
     nd_fit: LinearFit, col_fit: Optional[LinearFit], source: np.ndarray, band: np.ndarray, ndc: np.ndarray,
-    fallback_nd: np.ndarray, lo: float, s: LDISettings,
+    fallback_nd: np.ndarray, lo: float, s: LDISettings, scan: np.ndarray, nearest: np.ndarray,
 ) -> Tuple[np.ndarray, Optional[np.ndarray]]:
     """Hidden-layer disparity (h, w) and colour (N, 3) of the band's N pixels (raster order) or None.
 
@@ -666,10 +689,11 @@ def _nearest_surface(
     the foreground (or far beyond anything seen) is dropped. Where the two sources of a row
     or of a column agree (within ``_SAME_SURFACE`` jumps), the pixel takes the blend of the
     agreeing ones, weighted by inverse squared distance; pixels with no agreeing pair keep
-    ``fallback_nd`` (and the Voronoi colour).
+    ``fallback_nd`` (and the Voronoi colour). ``scan`` is :func:`scan_nearest` of ``source`` at
+    the band's pixels and ``nearest`` its :func:`nearest_index`.
     """
     br, bc = np.nonzero(band)
-    cand = scan_nearest(source)[:, br, bc]  # (4, N, 2)
+    cand = scan  # (4, N, 2)
     pix = (br.astype(np.float64), bc.astype(np.float64))
     limit = ndc[br, bc] - s.disparity_jump  # (N,)
     nds = np.full((4, len(br)), -np.inf)
@@ -716,8 +740,9 @@ def _nearest_surface(
         if sel.any():
             rgb[sel] += wts[k, sel, None] * continue_at(col_fit, cand[k][sel], (pix[0][sel], pix[1][sel]), s.max_colour_step)
     if not found.all():  # no candidate: the Voronoi continuation
-        nearest = nearest_index(source)
-        fb = extrapolate(col_fit, nearest, source, s.max_colour_step, band)
+        rest = np.zeros_like(band)
+        rest[br[~found], bc[~found]] = True
+        fb = extrapolate(col_fit, nearest, source, s.max_colour_step, rest)
         rgb[~found] = fb[br[~found], bc[~found]]
     return out, np.clip(rgb, 0.0, 1.0).astype(np.float32)
 

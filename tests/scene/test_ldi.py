@@ -439,6 +439,43 @@ def test_local_linear_fit_continues_a_plane_and_drops_noise_gradients():
     assert (cand[2, 7, 45] == (7, 45)).all()
 
 
+def test_windowed_fit_at_few_pixels_matches_the_blurred_fit(monkeypatch):
+    """At few pixels the fit sums their Gaussian windows directly: the blurred moments' fit (zeros
+    beyond the image), within float32 rounding, at the image's corners too; and more exact."""
+    import stylize3d_core.scene._fill as fill
+
+    rng = np.random.default_rng(3)
+    h, w = 50, 70
+    values = rng.random((h, w, 4)).astype(np.float32)
+    weight = (rng.random((h, w)) > 0.4).astype(np.float32)
+    where = rng.random((h, w)) > 0.97
+    where[0, 0] = where[-1, -1] = where[0, -1] = True
+    kwargs = dict(ridge=(0.25, 0.02, 0.02, 0.02), damp=(False, True, True, True), where=where)
+    monkeypatch.setattr(fill, "_WINDOW_COST", 0)  # blur the whole image
+    dense = fill.local_linear_fit(values, weight, 2.0, **kwargs)
+    monkeypatch.setattr(fill, "_WINDOW_COST", 10**9)  # sum the windows
+    windowed = fill.local_linear_fit(values, weight, 2.0, **kwargs)
+    for name, a, b in zip(dense._fields, dense, windowed):
+        assert a.shape == b.shape, name
+        np.testing.assert_allclose(b[where], a[where], atol=2e-3 if name == "trust" else 2e-4, err_msg=name)
+        assert not b[~where].any(), name  # 0 where not asked
+    # a plane far from the image's centre: the window sums are taken about each pixel, so its
+    # gradient is exact where the blurred image-wide moments lose digits in float32
+    yy, xx = np.mgrid[:h, :w].astype(np.float64)
+    plane = (0.3 + 0.01 * xx + 0.002 * yy)[..., None]
+    fit = fill.local_linear_fit(plane, weight, 2.0, ridge=0.0, where=where)
+    np.testing.assert_allclose(fit.grad[where][:, 0], np.broadcast_to([0.01, 0.002], (where.sum(), 2)), atol=1e-6)
+
+
+def test_scan_nearest_at_some_pixels_matches_the_full_scan():
+    from stylize3d_core.scene._fill import scan_nearest
+
+    rng = np.random.default_rng(4)
+    targets = rng.random((30, 40)) > 0.9
+    where = rng.random((30, 40)) > 0.5
+    np.testing.assert_array_equal(scan_nearest(targets, where=where), scan_nearest(targets)[:, where])
+
+
 def test_hidden_ground_continues_the_ground_plane():
     """Behind a card standing on a receding floor the hidden layer lies on the floor, not flat."""
     h, w = 120, 160
