@@ -129,3 +129,17 @@ def test_transfer_does_not_depend_on_the_order_of_the_points():
     a = ColourTransfer(rgb)(style, 0.7)
     b = ColourTransfer(rgb[perm])(style, 0.7)
     assert torch.equal(a[perm], b)
+
+
+def test_chunks_on_threads_give_the_same_colours(monkeypatch):
+    """Many colours are mapped in chunks on a thread pool: the same colours as one pass, bit for bit."""
+    import stylize3d_core.models.colour_transfer as ct
+
+    g = np.random.default_rng(5)
+    photo = torch.from_numpy(g.random((10_001, 3)).astype(np.float32))  # saturated ones too: gamut mapping
+    style = LabStats(np.array([55.0, 35.0, -30.0], np.float32), np.array([25.0, 40.0, 30.0], np.float32))
+    monkeypatch.setattr(ct, "_CHUNK", 1 << 20)
+    whole = ColourTransfer(photo)(style, 0.9)
+    monkeypatch.setattr(ct, "_CHUNK", 999)  # 11 chunks, the last one short
+    chunked = ColourTransfer(photo)(style, 0.9)
+    assert torch.equal(whole, chunked)

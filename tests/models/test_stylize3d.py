@@ -186,3 +186,20 @@ def test_add_texture_residual_keeps_the_output(cloud):
         before = head.render_view(head.dense_features(head.encode(geom), geom), geom.xyz, cam, 24, 32)[0]
         after = tex.render_view(tex.dense_features(tex.encode(geom), geom), geom.xyz, cam, 24, 32)[0]
     torch.testing.assert_close(after, before, rtol=0, atol=1e-6)
+
+
+def test_dense_features_for_inference_equal_the_differentiable_ones(cloud):
+    """Without gradients the detail colours are written into the interpolated result (no copy of the
+    whole (N, Cr + 3) array): bit for bit the concatenation that training differentiates through."""
+    pts, fov = cloud
+    model = Stylize3DModel(TINY_DETAIL).eval()
+    geom = prepare_geometry(pts.xyz, pts.rgb, fov, (40, 48), TINY_DETAIL.neighbourhood)
+    content = model.encode(geom).detach()
+    colours = torch.rand(geom.xyz.shape[0], 3)
+    for given in (None, colours):
+        with torch.no_grad():
+            fast = model.dense_features(content, geom, given)
+        slow = model.dense_features(content.clone().requires_grad_(True), geom, given)
+        assert slow.requires_grad and fast.shape == slow.shape
+        assert torch.equal(fast, slow.detach())
+        assert torch.equal(fast[:, -3:], geom.rgb if given is None else colours)
