@@ -8,7 +8,7 @@ per-frame 2D network and stylize-then-bake on the same cameras. Writes
 (docs/quality.md explains every figure).
 
     .venv/bin/python benchmarks/bench_quality.py [--quick] --out DIR [--model CKPT]
-                                                 [--eval-data runs/data/eval] [--strength 0.8] [--threads 2]
+                                                 [--eval-data runs/data/eval] [--strength 1] [--threads 2]
                                                  [--photos chelsea,stereo_motorcycle] [--styles NAME,...]
 
 ``--quick`` takes a few minutes on 2 cores, the full preset (30 frames at 384 px) about 20.
@@ -48,7 +48,7 @@ def main() -> int:
     ap.add_argument("--quick", action="store_true", help="the small preset (a few minutes)")
     ap.add_argument("--model", default=None, help="checkpoint to measure (default the shipped model)")
     ap.add_argument("--eval-data", default=None, help="held-out dataset folder (stage-1 PSNR / SSIM; skipped without)")
-    ap.add_argument("--strength", type=float, default=None, help="our style strength (default the library's, 0.8)")
+    ap.add_argument("--strength", type=float, default=None, help="our style strength (default the library's, 1)")
     ap.add_argument("--threads", type=int, default=2, help="torch CPU threads (default 2)")
     ap.add_argument("--photos", default=None, help="comma-separated photos of the set to measure (default all: "
                     + ",".join(p.name for p in QUALITY_PHOTOS) + ")")

@@ -14,6 +14,7 @@ from typing import Callable, Dict, NamedTuple, Optional, Tuple
 
 import numpy as np
 
+from .defaults import DEFAULT_STRENGTH
 from .errors import InputError
 from .depth.refine import REFINE_METHODS
 from .depth.types import DepthMap
@@ -125,7 +126,7 @@ class RenderJob:
     save_ply: Optional[str] = option(None, metavar="FILE", help="also write the coloured point cloud (PLY).")
     style: Optional[str] = option(None, metavar="IMAGE", default_text="none: the plain 3D photo",
                                   help="style image (a painting, a texture).")
-    strength: float = option(0.8, low=0.0, high=1.0, help="style strength from 0 (photo) to 1.")
+    strength: float = option(DEFAULT_STRENGTH, low=0.0, high=1.0, help="style strength from 0 (photo) to 1.")
     max_frames: int = option(MAX_FRAMES, low=1, high=10_000_000, metavar="N",
                              help="most frames a render may have, from frames or a camera path (a guard "
                                   "against runaway inputs: 10,000 frames are 5.5 min of video at 30 fps and "

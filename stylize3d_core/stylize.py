@@ -38,6 +38,7 @@ import numpy as np
 import torch
 
 from .checks import check_range, check_shape
+from .defaults import DEFAULT_STRENGTH
 from .errors import InputError, RenderInterrupted
 from .geometry.camera import Cameras
 from .models.adaattn import blend
@@ -58,7 +59,8 @@ class StylizeSettings:
     """Options of :class:`Stylized3DPhoto`.
 
     Attributes:
-        strength: style strength in [0, 1]; 0 renders the photo through the model. Default 0.8.
+        strength: style strength in [0, 1]; 0 renders the photo through the model. Default
+            :data:`DEFAULT_STRENGTH` (1: the full style).
         supersample: 1 (default) or 2 for full-quality frames (previews never supersample).
         preview_points_per_pixel: points kept per output pixel in previews. Default 3.
         seed: seed of the point order and the encoder's subset.
@@ -75,7 +77,7 @@ class StylizeSettings:
             view (:mod:`~stylize3d_core.models.palette`). False: the model's colours as they are.
     """
 
-    strength: float = 0.8
+    strength: float = DEFAULT_STRENGTH
     supersample: int = 1
     preview_points_per_pixel: float = 3.0
     seed: int = 0

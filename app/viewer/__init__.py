@@ -2,7 +2,7 @@
 
     stylize3d-viewer [PHOTO] [--style STYLE] [--depth SPEC] [--refine-depth METHOD]
                      [--model CHECKPOINT | --no-model]
-                     [--max-size 640] [--fov DEG] [--strength 0.8] [--threads 1] [--size 1280x800] [--invert-wheel]
+                     [--max-size 640] [--fov DEG] [--strength 1] [--threads 1] [--size 1280x800] [--invert-wheel]
                      [--test-script steps.json --test-report report.json]
 
 Modules: :mod:`.orbit` (camera math), :mod:`.state` (view state, preview sizes,
@@ -25,6 +25,7 @@ import argparse
 import sys
 from typing import List, Optional
 
+from stylize3d_core.defaults import DEFAULT_STRENGTH
 from stylize3d_core.errors import InputError
 from stylize3d_core.pipeline import PhotoSpec
 from stylize3d_core.resources import resolve_model
@@ -50,7 +51,8 @@ def build_parser() -> argparse.ArgumentParser:
                              "3D photo is shown")
     models.add_argument("--no-model", action="store_true",
                         help="show the plain 3D photo even if a model is available")
-    p.add_argument("--strength", type=float, default=0.8, help="style strength in [0, 1] (default 0.8)")
+    p.add_argument("--strength", type=float, default=DEFAULT_STRENGTH,
+                   help=f"style strength in [0, 1] (default {DEFAULT_STRENGTH:g})")
     p.add_argument("--threads", type=int, default=1,
                    help="torch threads of the compute worker (default 1: on a 2-core machine the other core "
                         "draws the window; more threads only help on an otherwise idle machine with more cores)")

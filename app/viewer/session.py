@@ -29,6 +29,7 @@ import cv2
 import numpy as np
 
 from stylize3d_core import resources
+from stylize3d_core.defaults import DEFAULT_STRENGTH
 from stylize3d_core.errors import InputError, RenderInterrupted
 from stylize3d_core.geometry.camera import Cameras
 from stylize3d_core.io.images import load_image, to_uint8
@@ -149,7 +150,7 @@ class ViewerSession:
         self._stylized = None  # Stylized3DPhoto
         self.style_path: Optional[str] = None
         self._style_rgb: Optional[np.ndarray] = None
-        self.strength = 0.8
+        self.strength = DEFAULT_STRENGTH
         self.colour_gain: Optional[np.ndarray] = None  # (3,) per-channel gain of stylized previews
         self._preview_hw: Optional[Tuple[int, int]] = None  # size of the last stylized preview
         self.style2_path: Optional[str] = None

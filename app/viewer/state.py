@@ -26,6 +26,7 @@ from typing import Dict, List, Literal, NamedTuple, Optional, Sequence, Tuple, g
 import numpy as np
 
 from stylize3d_core.checks import check_choice, check_range
+from stylize3d_core.defaults import DEFAULT_STRENGTH
 from stylize3d_core.errors import InputError
 from stylize3d_core.geometry.camera import Cameras, check_fov
 from stylize3d_core.geometry.camera_range import CameraRange
@@ -172,7 +173,7 @@ class ViewState:
             ``spec.photo`` is the open photo (None before one is built). Default max size 640.
         style: path of the style image, or None.
         model: checkpoint path, or None for the default ``assets/model/stylize3d_lite.safetensors``.
-        strength: style strength in [0, 1]. Default 0.8.
+        strength: style strength in [0, 1]. Default :data:`~stylize3d_core.defaults.DEFAULT_STRENGTH` (1).
         style2: path of a second style image to mix with the first, or None.
         mix: mix of the two styles in [0, 1] (0: the first only). Default 0.
         compare: show a before / after split of the view (original left, stylized right).
@@ -199,7 +200,7 @@ class ViewState:
     spec: PhotoSpec = PhotoSpec(max_size=VIEWER_MAX_SIZE)
     style: Optional[str] = None
     model: Optional[str] = None
-    strength: float = 0.8
+    strength: float = DEFAULT_STRENGTH
     style2: Optional[str] = None
     mix: float = 0.0
     compare: bool = False

@@ -39,6 +39,7 @@ import numpy as np
 import open3d as o3d
 import open3d.visualization.gui as gui
 
+from stylize3d_core.defaults import DEFAULT_STRENGTH
 from stylize3d_core.errors import InputError
 from stylize3d_core.pipeline import PhotoSpec
 from stylize3d_core.render.plain import frame_size
@@ -83,7 +84,7 @@ class ViewerOptions:
     style: Optional[str] = None
     model: Optional[str] = None
     use_model: bool = True
-    strength: float = 0.8
+    strength: float = DEFAULT_STRENGTH
     width: int = 1280
     height: int = 800
     invert_wheel: bool = False

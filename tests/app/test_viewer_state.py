@@ -25,7 +25,7 @@ SCENE = OrbitScene(centre_depth=0.7)
 
 def test_defaults_are_valid_and_bad_values_refused():
     s = ViewState()
-    assert s.pose == HOME and s.stylized and s.strength == 0.8 and s.export == ExportSettings()
+    assert s.pose == HOME and s.stylized and s.strength == 1.0 and s.export == ExportSettings()
     with pytest.raises(InputError, match="strength"):
         ViewState(strength=1.5)
     with pytest.raises(InputError, match="trajectory"):
