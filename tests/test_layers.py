@@ -16,6 +16,7 @@ LAYERS: Tuple[Tuple[str, ...], ...] = (
     ("errors",),
     ("checks",),
     ("options",),
+    ("defaults",),
     ("resources",),
     ("geometry",),
     ("io",),

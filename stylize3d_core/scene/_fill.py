@@ -237,7 +237,7 @@ def local_linear_fit(
             texture gets no gradient, smooth shading keeps it.
         where: (H, W) bool, the pixels whose fit is wanted (all by default; 0 elsewhere). Few
             of them (a window of taps each costs less than blurring the image): the moments are
-            summed over each one's window (:func:`_window_moments`, the same Gaussian taps);
+            summed over each one's window (:func:`_sparse_fit`, the same Gaussian taps);
             else they are blurred over the whole image and the fit is solved there only.
     """
     h, w = weight.shape
