@@ -15,8 +15,8 @@ frames). Palette matching corrects that after the model:
    but the edges stay as sharp as the model made them),
    out-of-gamut colours brought in by chroma (:func:`~.colour_transfer.gamut_map`);
 3. fit the affine map ``rgb -> M^T [rgb, 1]`` (a 4 x 3 matrix) from the pixels to
-   their corrected colours by least squares (twice: the second pass corrects what
-   the first left of the L*a*b* statistics).
+   their corrected colours by least squares, again and again (up to 8 passes: each corrects
+   what the previous map left of the L*a*b* statistics).
 
 Every frame is then ``clamp([rgb, 1] M)``: a global colour map, which adds no
 view-dependent change of its own (it scales the differences the model's views
@@ -43,6 +43,8 @@ MAX_FIT_PIXELS = 1 << 13
 """Pixels used for the fit (a deterministic stride subsample beyond this)."""
 
 _EPS = 1e-3
+_CONVERGED = 1e-5
+"""The fit stops when no entry of the map changes by more than this between passes."""
 
 
 class Palette(NamedTuple):
@@ -79,18 +81,21 @@ def _apply_np(x1: np.ndarray, matrix: np.ndarray) -> np.ndarray:
 
 
 def fit_palette(pixels: np.ndarray, target: LabStats, *, max_gain: float = MAX_PALETTE_GAIN,
-                min_lightness_gain: float = 1.0, passes: int = 2) -> Palette:
+                min_lightness_gain: float = 1.0, passes: int = 8) -> Palette:
     """The palette map taking ``pixels`` (n, 3) (or an image (h, w, 3)), floats in [0, 1], to ``target``'s statistics.
 
     The L* std is never scaled by less than ``min_lightness_gain`` (1: the frames' lightness contrast,
     their detail, is kept where the style is flatter; the style's palette and mean lightness still apply).
 
     Non-finite pixels are ignored; with no finite pixel, or a target that is not finite, the map is the identity.
+    ``passes``: at most this many fits, each correcting what the previous map left of the statistics (it stops
+    when the map no longer changes). Two passes left the held-out pairs' frames 1.27x the 2D network's Lab
+    distance from the style; eight, 0.86x (quick preset, strength 1), for ~50 ms more per style.
     """
     check_range(max_gain, "max_gain", 1.0, 100.0)
     check_range(min_lightness_gain, "min_lightness_gain", 0.0, 1.0)
-    if passes not in (1, 2, 3):
-        raise InputError("passes", f"must be 1, 2 or 3, got {passes!r}")
+    if isinstance(passes, bool) or not isinstance(passes, int) or not 1 <= passes <= 8:
+        raise InputError("passes", f"must be an integer from 1 to 8, got {passes!r}")
     x = np.asarray(pixels, np.float32).reshape(-1, 3)
     x = x[np.isfinite(x).all(axis=1)].clip(0.0, 1.0)
     if x.shape[0] > MAX_FIT_PIXELS:
@@ -117,7 +122,11 @@ def fit_palette(pixels: np.ndarray, target: LabStats, *, max_gain: float = MAX_P
         want[:, 1:] = want[:, 1:].clip(-127.0, 127.0)
         want = gamut_map(want)
         y = cv2.cvtColor(want.reshape(-1, 1, 3), cv2.COLOR_Lab2RGB).reshape(-1, 3).clip(0.0, 1.0)
-        matrix = np.linalg.solve(gram + ridge * np.eye(4), x1.T @ y.astype(np.float64) + ridge * identity)
+        new = np.linalg.solve(gram + ridge * np.eye(4), x1.T @ y.astype(np.float64) + ridge * identity)
+        done = bool(np.isfinite(new).all() and np.abs(new - matrix).max() < _CONVERGED)
+        matrix = new
+        if done:
+            break
     if not np.isfinite(matrix).all():
         return Palette(identity, before, before, target)
     matrix = matrix.astype(np.float32)

@@ -96,3 +96,20 @@ def test_apply_is_float32_under_a_bfloat16_autocast():
     with torch.autocast(device_type="cpu", dtype=torch.bfloat16):
         out = apply_palette(x, m)
     assert out.dtype == torch.float32 and torch.allclose(out, 0.5 * x + 0.25)
+
+
+def test_more_passes_come_closer_to_the_target():
+    """Each pass corrects what the previous map left of the statistics: the distance to the target
+    falls with the passes (1 -> 2 -> 8, the default); the image's own statistics keep the identity."""
+    img = _image(3)
+    target = LabStats(np.array([45.0, 18.0, -12.0], np.float32), np.array([22.0, 14.0, 16.0], np.float32))
+
+    def distance(passes):
+        after = fit_palette(img, target, passes=passes).after
+        return float(np.abs(after.mean - target.mean).sum() + np.abs(after.std - target.std).sum())
+
+    d1, d2, d8 = distance(1), distance(2), distance(8)
+    assert d8 < d2 < d1
+    assert d8 < 0.8 * d2  # two passes were far from converged
+    own = fit_palette(img, fit_palette(img, target).before)  # the image's own statistics: the identity, at once
+    np.testing.assert_allclose(own.matrix, np.vstack([np.eye(3), np.zeros((1, 3))]), atol=2e-3)
