@@ -73,7 +73,7 @@ class StylizeSettings:
         preview_decode_scale: the same for previews (default 1).
         match_palette: True (default): after the model, one colour matrix, the same for every view, brings
             the frames' L*a*b* statistics to the style's (by the strength; the frames' lightness contrast
-            never lowered), fitted once per photo, style and strength on a small render of the photo's own
+            kept, within a few percent), fitted once per photo, style and strength on a small render of the photo's own
             view (:mod:`~stylize3d_core.models.palette`). False: the model's colours as they are.
     """
 

@@ -10,8 +10,8 @@ frames). Palette matching corrects that after the model:
 1. render the photo's own view small (:func:`fit_palette` takes its pixels);
 2. move those pixels' L*a*b* mean and std to the target statistics (:func:`palette_target`:
    the photo's moved by the strength towards the style's), per channel, gains limited to
-   ``[1 / max_gain, max_gain]`` and the lightness contrast of the frames never lowered
-   (their detail: a style flatter than the frames gives its palette and mean lightness,
+   ``[1 / max_gain, max_gain]`` and the lightness contrast of the frames not lowered by any
+   pass (the passes together can lower it by a few percent; docs/quality.md) (their detail: a style flatter than the frames gives its palette and mean lightness,
    but the edges stay as sharp as the model made them),
    out-of-gamut colours brought in by chroma (:func:`~.colour_transfer.gamut_map`);
 3. fit the affine map ``rgb -> M^T [rgb, 1]`` (a 4 x 3 matrix) from the pixels to
@@ -84,8 +84,9 @@ def fit_palette(pixels: np.ndarray, target: LabStats, *, max_gain: float = MAX_P
                 min_lightness_gain: float = 1.0, passes: int = 8) -> Palette:
     """The palette map taking ``pixels`` (n, 3) (or an image (h, w, 3)), floats in [0, 1], to ``target``'s statistics.
 
-    The L* std is never scaled by less than ``min_lightness_gain`` (1: the frames' lightness contrast,
-    their detail, is kept where the style is flatter; the style's palette and mean lightness still apply).
+    No pass scales the L* std by less than ``min_lightness_gain`` (1: the frames' lightness contrast,
+    their detail, is kept where the style is flatter, within a few percent over all the passes; the
+    style's palette and mean lightness still apply).
 
     Non-finite pixels are ignored; with no finite pixel, or a target that is not finite, the map is the identity.
     ``passes``: at most this many fits, each correcting what the previous map left of the statistics (it stops
