@@ -266,26 +266,40 @@ def local_linear_fit(
     mv = g(wv) * inv[..., None]  # (H, W, C), or (N, C) where asked
     cvx = g(wv * x[..., None]) * inv[..., None] - mv * mx[..., None]
     cvy = g(wv * y[..., None]) * inv[..., None] - mv * my[..., None]
-    c = v.shape[-1]
-    lam = (np.broadcast_to(np.asarray(ridge, np.float32), (c,)) * sigma * sigma)  # (C,)
-    a, b, d = cxx[..., None] + lam, cxy[..., None], cyy[..., None] + lam  # (H, W, C)
+    grad, keep = _solve_planes(cxx, cxy, cyy, cvx, cvy, lambda: g(wv * v) * inv[..., None] - mv * mv,
+                               ridge, damp, sigma, np.float32)
+    fields = (mv, np.stack([mx + w / 2.0, my + h / 2.0], axis=-1), grad, s0, keep)
+    return LinearFit(*fields) if where is None else _scatter(fields, (h, w), idx)
+
+
+def _solve_planes(
+    cxx: np.ndarray, cxy: np.ndarray, cyy: np.ndarray, cvx: np.ndarray, cvy: np.ndarray, variance,
+    ridge: Union[float, Sequence[float]], damp: Union[bool, Sequence[bool]], sigma: float, dtype,
+) -> Tuple[np.ndarray, np.ndarray]:
+    """The gradients (..., C, 2) of the fits from their centred moments (positions (...), values
+    (..., C)), and the damping kept (..., C): :func:`local_linear_fit`'s normal equations.
+    ``variance()`` gives the values' centred variance (..., C), asked for only when a channel is damped."""
+    c = cvx.shape[-1]
+    lam = np.broadcast_to(np.asarray(ridge, dtype), (c,)) * sigma * sigma  # (C,)
+    a, b, d = cxx[..., None] + lam, cxy[..., None], cyy[..., None] + lam  # (..., C)
     det = np.maximum(a * d - b * b, 1e-12)
     gx = (d * cvx - b * cvy) / det
     gy = (a * cvy - b * cvx) / det
     damped = np.broadcast_to(np.asarray(damp, bool), (c,))
     keep = np.ones_like(gx)
     if damped.any():  # keep the gradient where the plane explains the local variance, drop it on noise
-        var = g(wv * v) * inv[..., None] - mv * mv  # (H, W, C)
-        r2 = (gx * cvx + gy * cvy) / np.maximum(var, 1e-12)  # R^2 of the (ridge-shrunk) fit
+        r2 = (gx * cvx + gy * cvy) / np.maximum(variance(), 1e-12)  # R^2 of the (ridge-shrunk) fit
         keep = np.clip((r2 - _R2_NOISE) / (_R2_SMOOTH - _R2_NOISE), 0.0, 1.0)
         keep[..., ~damped] = 1.0
         gx, gy = gx * keep, gy * keep
-    fields = (mv, np.stack([mx + w / 2.0, my + h / 2.0], axis=-1), np.stack([gx, gy], axis=-1), s0, keep)
-    if where is None:
-        return LinearFit(*fields)
+    return np.stack([gx, gy], axis=-1), keep
+
+
+def _scatter(fields, size: Tuple[int, int], idx) -> LinearFit:
+    """A :class:`LinearFit` of image size ``size`` from fields given at the pixels ``idx`` (0 elsewhere)."""
     full = []
     for f in fields:
-        out = np.zeros((h, w) + f.shape[1:], f.dtype)
+        out = np.zeros(tuple(size) + f.shape[1:], f.dtype)
         out[idx] = f
         full.append(out)
     return LinearFit(*full)
@@ -353,26 +367,9 @@ def _sparse_fit(
     mv = val[:, 0] * inv[:, None]  # (N, C)
     cvx = val[:, 1] * inv[:, None] - mv * ox[:, None]
     cvy = val[:, 2] * inv[:, None] - mv * oy[:, None]
-    lam = np.broadcast_to(np.asarray(ridge, np.float64), (c,)) * sigma * sigma
-    a_, b_, d_ = cxx[:, None] + lam, cxy[:, None], cyy[:, None] + lam  # (N, C)
-    det = np.maximum(a_ * d_ - b_ * b_, 1e-12)
-    gx = (d_ * cvx - b_ * cvy) / det
-    gy = (a_ * cvy - b_ * cvx) / det
-    damped = np.broadcast_to(np.asarray(damp, bool), (c,))
-    keep = np.ones_like(gx)
-    if damped.any():
-        var = val[:, 3] * inv[:, None] - mv * mv
-        r2 = (gx * cvx + gy * cvy) / np.maximum(var, 1e-12)
-        keep = np.clip((r2 - _R2_NOISE) / (_R2_SMOOTH - _R2_NOISE), 0.0, 1.0)
-        keep[:, ~damped] = 1.0
-        gx, gy = gx * keep, gy * keep
-    fields = (mv, np.stack([cols + ox, rows + oy], axis=-1), np.stack([gx, gy], axis=-1), s0, keep)
-    full = []
-    for f in fields:
-        out = np.zeros((h, w) + f.shape[1:], np.float64)
-        out[rows, cols] = f
-        full.append(out)
-    return LinearFit(*full)
+    grad, keep = _solve_planes(cxx, cxy, cyy, cvx, cvy, lambda: val[:, 3] * inv[:, None] - mv * mv,
+                               ridge, damp, sigma, np.float64)
+    return _scatter((mv, np.stack([cols + ox, rows + oy], axis=-1), grad, s0, keep), (h, w), (rows, cols))
 
 
 def split_fit(fit: LinearFit, channels: slice) -> LinearFit:
