@@ -300,3 +300,34 @@ def detail_loss(pred: torch.Tensor, target: torch.Tensor, mask: Optional[torch.T
         return diff.abs().mean()
     valid = -F.max_pool2d(-mask[:, None].to(pred), 3, stride=1)  # (B, 1, H-2, W-2): 1 where all 9 are valid
     return (diff.abs() * valid).sum() / (c * valid.sum()).clamp(min=1.0)
+
+
+def sharpness_loss(pred: torch.Tensor, reference: torch.Tensor, mask: Optional[torch.Tensor] = None,
+                   eps: float = 1e-6) -> torch.Tensor:
+    """How far the images' sharpness falls short of the references': a scalar >= 0.
+
+    Sharpness is what the quality benchmark measures: the standard deviation of the
+    Laplacian of the grey image (BT.601 weights), here over the pixels whose whole 3x3
+    neighbourhood is valid in ``mask`` (B, H, W) (all when None). Per image the loss is
+    ``max(0, 1 - sharp(pred) / sharp(reference))``, the mean over the batch: no charge for
+    strokes a style adds, only for detail a blur takes away. ``reference`` is detached.
+    """
+    if pred.shape != reference.shape or pred.dim() != 4 or pred.shape[1] != 3:
+        raise InputError("pred", f"expected two (B, 3, H, W) tensors of one shape, got {tuple(pred.shape)} "
+                         f"and {tuple(reference.shape)}")
+    grey_w = pred.new_tensor([0.299, 0.587, 0.114]).view(1, 3, 1, 1)
+    kernel = _LAPLACIAN.to(pred)[None, None]
+
+    def lap_std(img: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+        lap = F.conv2d((img * grey_w).sum(1, keepdim=True), kernel)  # (B, 1, H-2, W-2)
+        n = valid.sum(dim=(1, 2, 3)).clamp(min=1.0)
+        mean = (lap * valid).sum(dim=(1, 2, 3)) / n
+        var = (((lap - mean.view(-1, 1, 1, 1)) ** 2) * valid).sum(dim=(1, 2, 3)) / n
+        return torch.sqrt(var + eps)
+
+    if mask is None:
+        valid = pred.new_ones(pred.shape[0], 1, pred.shape[2] - 2, pred.shape[3] - 2)
+    else:
+        valid = -F.max_pool2d(-mask[:, None].to(pred), 3, stride=1)
+    ratio = lap_std(pred, valid) / lap_std(reference.detach(), valid).clamp(min=1e-3)
+    return torch.relu(1.0 - ratio).mean()

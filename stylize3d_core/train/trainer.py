@@ -49,7 +49,8 @@ from ..io.atomic import atomic_path
 from ..models.checkpoint import load_checkpoint, save_checkpoint
 from ..models.colour_transfer import lab_stats, transfer_colours
 from ..models.efficientnet_lite import EfficientNetLiteFeatures
-from ..models.losses import PerceptualLoss, PerceptualLossConfig, StylizationLoss, colour_statistics_loss, detail_loss
+from ..models.losses import (PerceptualLoss, PerceptualLossConfig, StylizationLoss, colour_statistics_loss, detail_loss,
+                             sharpness_loss)
 from ..models.style_features import StyleEncoder
 from ..models.stylize3d import (ConfigName, ModelConfig, Stylize3DModel, add_colour_transform, add_detail_path,
                                 add_texture_residual)
@@ -86,6 +87,10 @@ class LossWeights:
         teacher_detail: stage 2 teacher samples, L1 of the Laplacian against them
             (:func:`~stylize3d_core.models.losses.detail_loss`, raw ~0.02-0.05): the teacher's
             strokes, which the pixel L1 lets a blur average away. Default 0 (off).
+        sharpness: stage 2, how far each stylized view's sharpness (std of the grey Laplacian,
+            the quality benchmark's measure) falls short of its plain target view's
+            (:func:`~stylize3d_core.models.losses.sharpness_loss`, raw 0-1; no charge for added
+            strokes). Default 0 (off).
     """
 
     l1: float = 1.0
@@ -98,6 +103,7 @@ class LossWeights:
     teacher_perceptual: float = 0.05
     colour: float = 2.0
     teacher_detail: float = 0.0
+    sharpness: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -248,6 +254,8 @@ class TrainStep(nn.Module):
             st = self.stylization(pred, target, maps)
             terms["content"] = w.content * st.content
             terms["style"] = w.style * st.style
+            if w.sharpness:
+                terms["sharpness"] = w.sharpness * sharpness_loss(pred, target, sample.masks.float())
             if w.colour:
                 terms["colour"] = w.colour * colour_statistics_loss(pred, style.unsqueeze(0))
             if teacher is not None:

@@ -8,7 +8,7 @@ import torch.nn.functional as F
 
 from stylize3d_core.errors import InputError
 from stylize3d_core.models.efficientnet_lite import EfficientNetLiteFeatures
-from stylize3d_core.models.losses import detail_loss
+from stylize3d_core.models.losses import detail_loss, sharpness_loss
 from stylize3d_core.models.losses import (
     PerceptualLoss,
     PerceptualLossConfig,
@@ -228,3 +228,34 @@ def test_detail_loss_charges_a_blur_and_has_gradients():
     assert loss.item() > 0.5 * detail_loss(torch.full_like(target, 0.5), target).item()  # a blur keeps little detail
     loss.backward()
     assert torch.isfinite(pred.grad).all() and pred.grad.abs().sum() > 0
+
+
+def test_sharpness_loss_charges_a_blur_not_added_strokes():
+    g = torch.Generator().manual_seed(0)
+    ref = torch.rand(2, 3, 24, 24, generator=g)
+    assert sharpness_loss(ref, ref).item() == pytest.approx(0.0, abs=1e-6)
+    assert sharpness_loss(torch.full_like(ref, 0.4), ref).item() == pytest.approx(1.0, abs=3e-3)  # no detail left
+    # half the contrast: half the Laplacian's std, whatever the offset
+    assert sharpness_loss(0.5 * ref + 0.2, ref).item() == pytest.approx(0.5, abs=1e-3)
+    # stronger detail than the reference is not charged
+    assert sharpness_loss(2.0 * ref, ref).item() == 0.0
+    # a mask: only the valid half counts (the other half of pred is flat)
+    pred = ref.clone()
+    pred[..., 12:] = 0.5
+    mask = torch.zeros(2, 24, 24)
+    mask[..., :12] = 1.0
+    assert sharpness_loss(pred, ref, mask).item() == pytest.approx(0.0, abs=1e-5)
+    assert sharpness_loss(pred, ref).item() > 0.2
+    with pytest.raises(InputError):
+        sharpness_loss(ref[:, :2], ref[:, :2])
+
+
+def test_sharpness_loss_has_gradients_towards_detail():
+    g = torch.Generator().manual_seed(1)
+    ref = torch.rand(1, 3, 16, 16, generator=g)
+    pred = (0.3 * ref).requires_grad_(True)
+    loss = sharpness_loss(pred, ref)
+    loss.backward()
+    assert torch.isfinite(pred.grad).all() and pred.grad.abs().sum() > 0
+    stepped = (pred - 0.5 * pred.grad / pred.grad.abs().max()).detach()
+    assert sharpness_loss(stepped, ref).item() < loss.item()
