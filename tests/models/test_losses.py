@@ -248,6 +248,20 @@ def test_sharpness_loss_charges_a_blur_not_added_strokes():
     assert sharpness_loss(pred, ref).item() > 0.2
     with pytest.raises(InputError):
         sharpness_loss(ref[:, :2], ref[:, :2])
+    with pytest.raises(InputError, match="too small"):
+        sharpness_loss(ref[..., :5, :5], ref[..., :5, :5])
+
+
+def test_sharpness_loss_is_not_met_by_a_pixel_checkerboard():
+    g = torch.Generator().manual_seed(2)
+    ref = torch.rand(1, 3, 32, 32, generator=g)
+    y, x = torch.meshgrid(torch.arange(32), torch.arange(32), indexing="ij")
+    checker = (0.3 * ((x + y) % 2) - 0.15).expand(1, 3, 32, 32)
+    flat = torch.full_like(ref, 0.5)
+    # at full resolution a checkerboard over a flat image looks as sharp as the reference, or sharper
+    assert sharpness_loss(flat + checker, ref, pool=1).item() == 0.0
+    # pooled by 2 (the default) it adds nothing: all the detail is still missing
+    assert sharpness_loss(flat + checker, ref).item() == pytest.approx(1.0, abs=3e-3)
 
 
 def test_sharpness_loss_has_gradients_towards_detail():
