@@ -87,11 +87,12 @@ class PhotoSpec:
             raise InputError("stereo_card", f"a stereo card gives its own depth; drop --depth {self.depth}")
 
 
-EXPORT_POINTS_PER_PIXEL = 6.0
+EXPORT_POINTS_PER_PIXEL = 7.0
 """The export default of ``StylizeSettings.final_points_per_pixel`` (``RenderJob.points_per_pixel``), picked
 from ``stylize3d bench speed``: at 512 px from a 1 MP photo (about 10 points per pixel) it is faster than
-every point and 41 dB PSNR from it with the version-4 model (47 dB with version 1; ``bench targets``; the
-final-frame target is 40 dB)."""
+every point. 6 was 41 dB PSNR from every point with the version-4 and -5 models but 39.7 dB with the
+sharper version 6, whose texture depends more on which points land; 7 is 43.6 dB in about the same time
+(404 against 394 ms; 8: 45.9 dB, 484 ms; the final-frame target is 40 dB)."""
 
 
 @documented

@@ -62,7 +62,8 @@ class StylizeSettings:
         strength: style strength in [0, 1]; 0 renders the photo through the model. Default
             :data:`DEFAULT_STRENGTH` (1: the full style).
         supersample: 1 (default) or 2 for full-quality frames (previews never supersample).
-        preview_points_per_pixel: points kept per output pixel in previews. Default 3.
+        preview_points_per_pixel: points kept per output pixel in previews. Default 5 (3 until version 6 of
+            the model: 28.4 dB from every point with it, 5 31.4 dB, the preview target being 30 dB, at ~9 % more time).
         seed: seed of the point order and the encoder's subset.
         final_points_per_pixel: None (default): full frames rasterize every point. A number: full frames
             keep about this many points per output (super)pixel, as previews do (a prefix of the point
@@ -79,7 +80,7 @@ class StylizeSettings:
 
     strength: float = DEFAULT_STRENGTH
     supersample: int = 1
-    preview_points_per_pixel: float = 3.0
+    preview_points_per_pixel: float = 5.0
     seed: int = 0
     final_points_per_pixel: Optional[float] = None
     decode_scale: int = 1

@@ -8,7 +8,7 @@ from stylize3d_core.resources import style_image
 
 
 def test_export_points_per_pixel_reaches_the_stylize_settings():
-    assert RenderJob().points_per_pixel == EXPORT_POINTS_PER_PIXEL == 6.0
+    assert RenderJob().points_per_pixel == EXPORT_POINTS_PER_PIXEL == 7.0
     settings, _, _ = _check_style_inputs(RenderJob(style=str(style_image())))
     assert settings.final_points_per_pixel == EXPORT_POINTS_PER_PIXEL
     settings, _, _ = _check_style_inputs(RenderJob(style=str(style_image()), points_per_pixel=2.5, supersample=2))
