@@ -220,6 +220,7 @@ class Stylized3DPhoto:
         self._dense: Optional[torch.Tensor] = None  # (N, Cr) in self._order
         self._palette_target: Optional[LabStats] = None  # what the palette map aims at (set with the dense features)
         self._palette: Optional[Palette] = None  # fitted at the first render after a style/strength change
+        self._palettes: Dict[Tuple[int, int], Palette] = {}  # per render size (see _palette_for)
         self._strength = settings.strength
         self.timings.update({"geometry": t1 - t0, "encode": t2 - t1})
 
@@ -311,6 +312,7 @@ class Stylized3DPhoto:
             # float32 whatever the autocast dtype (bfloat16 under torch.autocast): the rasterizer takes float32
             self._dense = dense.float().contiguous()
         self._palette_target, self._palette = target, None
+        self._palettes = {}
         self.timings["upsample"] = time.perf_counter() - t0
 
     def _colour_transfer(self) -> ColourTransfer:
@@ -318,22 +320,38 @@ class Stylized3DPhoto:
             self._transfer = ColourTransfer(self._in_order.rgb)
         return self._transfer
 
-    PALETTE_FIT_SIZE = 160
-    """Long side (px) of the photo's own view rendered to fit the palette map."""
+    PALETTE_FIT_MAX = 1024
+    """Longest side (px) of the own-view render a palette map is fitted on (larger frames: that size)."""
+    PALETTE_SIZES = 16
+    """Palette maps kept per style and strength, one per render size (the least recently fitted goes)."""
 
-    def _update_palette(self, should_stop: Optional[Callable[[], bool]]) -> None:
+    def _palette_for(self, height: int, width: int, should_stop: Optional[Callable[[], bool]]) -> Palette:
+        """The palette map for frames of (height, width): fitted once per size on the photo's own view
+        rendered at that size. The model's colours depend on the size it renders at (where points are
+        sparser than pixels its own fill shows more: version 6 of the lite model is up to ~12 levels bluer
+        at 48 px than at 768 px), so one map fitted at one size left previews and full frames of other
+        sizes off the target, and a visible colour jump when a full frame replaced a preview."""
+        key = (height, width)
+        pal = self._palettes.get(key)
+        if pal is not None:
+            return pal
         t0 = time.perf_counter()
-        h, w = self.photo.size
-        scale = self.PALETTE_FIT_SIZE / max(h, w)
-        fh, fw = max(8, round(h * scale)), max(8, round(w * scale))
+        scale = min(1.0, self.PALETTE_FIT_MAX / max(height, width))
+        fh, fw = max(8, round(height * scale)), max(8, round(width * scale))
         own = Cameras.identity(self.photo.fov_y_deg)
+        # a preview render (a point subset): its colours match a full render of the size within ~0.3 levels
         rgb = self._render_model(own, fh, fw, preview=True, should_stop=should_stop)
-        self._palette = fit_palette(rgb.permute(1, 2, 0).numpy(), self._palette_target)
+        pal = fit_palette(rgb.permute(1, 2, 0).numpy(), self._palette_target)
+        if len(self._palettes) >= self.PALETTE_SIZES:
+            self._palettes.pop(next(iter(self._palettes)))
+        self._palettes[key] = pal
         self.timings["palette"] = time.perf_counter() - t0
+        return pal
 
     @property
     def palette(self) -> Optional[Palette]:
-        """The palette map of the current style and strength (None: none applies, or not fitted yet)."""
+        """The palette map of the last render's size for the current style and strength (None: none applies,
+        or not fitted yet)."""
         return self._palette
 
     def render(self, camera: Cameras, height: int, width: int, *, preview: bool = False,
@@ -349,11 +367,11 @@ class Stylized3DPhoto:
         """
         if self._dense is None:  # upsampled lazily: a style set right after construction is not done twice
             self._update_dense()
-        if self._palette_target is not None and self._palette is None:
-            self._update_palette(should_stop)
+        pal = None if self._palette_target is None else self._palette_for(height, width, should_stop)
         rgb = self._render_model(camera, height, width, preview=preview, should_stop=should_stop)
-        if self._palette is not None:
-            rgb = apply_palette(rgb, self._palette.matrix)
+        self._palette = pal
+        if pal is not None:
+            rgb = apply_palette(rgb, pal.matrix)
         return rgb.permute(1, 2, 0).contiguous().numpy()
 
     def _render_model(self, camera: Cameras, height: int, width: int, *, preview: bool,

@@ -295,3 +295,32 @@ def test_palette_map_is_one_colour_matrix_for_every_view(stylized):
     assert on.palette is None
     with pytest.raises(InputError):
         StylizeSettings(match_palette="yes")
+
+
+def test_palette_map_is_fitted_per_render_size(stylized):
+    """The model's colours depend on the render size, so each size gets its own map, fitted on the own view
+    at that size, and reused for every view of that size."""
+    from stylize3d_core.geometry.camera import Cameras as Cams
+    from stylize3d_core.models.checkpoint import Checkpoint
+    from stylize3d_core.models.palette import _stats, _to_lab
+
+    p = stylized.photo
+    g = np.random.default_rng(6)
+    style = np.kron(g.random((4, 4, 3)), np.ones((8, 8, 1))).astype(np.float32) * 0.6
+    on = Stylized3DPhoto(p, Checkpoint(stylized.model, 2, {}), StylizeSettings(strength=1.0))
+    on.set_style(style)
+    own = Cams.identity(p.fov_y_deg)
+    small, big = on.render(own, 24, 32, preview=True), on.render(own, 60, 80)
+    pal_big = on.palette
+    on.render(own, 24, 32)
+    pal_small = on.palette
+    assert pal_small is not pal_big and not np.array_equal(pal_small.matrix, pal_big.matrix)
+    on.render(own, 60, 80)
+    assert on.palette is pal_big  # cached per size
+    # each size's own view reaches the aimed-at statistics (what the map was fitted for)
+    for img, pal in ((small, pal_small), (big, pal_big)):
+        got = _stats(_to_lab(img.reshape(-1, 3)))
+        assert np.abs(np.asarray(got.mean) - np.asarray(pal.target.mean)).max() < 1.5
+    on.set_strength(0.5)  # a new target: every size is fitted again
+    on.render(own, 60, 80)
+    assert on.palette is not pal_big
