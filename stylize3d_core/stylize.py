@@ -339,8 +339,9 @@ class Stylized3DPhoto:
         scale = min(1.0, self.PALETTE_FIT_MAX / max(height, width))
         fh, fw = max(8, round(height * scale)), max(8, round(width * scale))
         own = Cameras.identity(self.photo.fov_y_deg)
-        # a preview render (a point subset): its colours match a full render of the size within ~0.3 levels
-        rgb = self._render_model(own, fh, fw, preview=True, should_stop=should_stop)
+        # every point, no supersampling: the map depends on the photo, style, strength and size only, not on
+        # the preview or final point budgets (a budget's subset changes the colours by up to ~0.3 levels)
+        rgb = self._render_model(own, fh, fw, preview=True, should_stop=should_stop, every_point=True)
         pal = fit_palette(rgb.permute(1, 2, 0).numpy(), self._palette_target)
         if len(self._palettes) >= self.PALETTE_SIZES:
             self._palettes.pop(next(iter(self._palettes)))
@@ -375,10 +376,13 @@ class Stylized3DPhoto:
         return rgb.permute(1, 2, 0).contiguous().numpy()
 
     def _render_model(self, camera: Cameras, height: int, width: int, *, preview: bool,
-                      should_stop: Optional[Callable[[], bool]]) -> torch.Tensor:
-        """The model's view (3, H, W) float32 in [0, 1], before the palette map."""
+                      should_stop: Optional[Callable[[], bool]], every_point: bool = False) -> torch.Tensor:
+        """The model's view (3, H, W) float32 in [0, 1], before the palette map (``every_point``: a preview
+        render, i.e. no supersampling, of all the points at full-size decoding)."""
         n = self.num_points
-        if preview:
+        if every_point:
+            ss, scale, per_pixel = 1, 1, None
+        elif preview:
             ss, scale, per_pixel = 1, self.settings.preview_decode_scale, self.settings.preview_points_per_pixel
         else:
             ss, scale, per_pixel = (self.settings.supersample, self.settings.decode_scale,
