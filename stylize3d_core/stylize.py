@@ -219,7 +219,7 @@ class Stylized3DPhoto:
         self._mix = 0.0
         self._dense: Optional[torch.Tensor] = None  # (N, Cr) in self._order
         self._palette_target: Optional[LabStats] = None  # what the palette map aims at (set with the dense features)
-        self._palette: Optional[Palette] = None  # fitted at the first render after a style/strength change
+        self._palette: Optional[Palette] = None  # the map the last render used (its size's, from self._palettes)
         self._palettes: Dict[Tuple[int, int], Palette] = {}  # per render size (see _palette_for)
         self._strength = settings.strength
         self.timings.update({"geometry": t1 - t0, "encode": t2 - t1})
