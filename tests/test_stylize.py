@@ -20,7 +20,7 @@ def stylized(tmp_path_factory):
     depth = np.ones((48, 64), np.float32)
     depth[12:36, 16:48] = 0.5
     p = Photo3D.build(rgb, DepthMap(depth, np.ones_like(depth, bool), "metric", "test"))
-    return Stylized3DPhoto(p, path, StylizeSettings(strength=1.0))
+    return Stylized3DPhoto(p, path, StylizeSettings(strength=1.0, bfloat16=False))  # exact comparisons: float32
 
 
 def test_render_full_and_preview(stylized):
@@ -324,3 +324,23 @@ def test_palette_map_is_fitted_per_render_size(stylized):
     on.set_strength(0.5)  # a new target: every size is fitted again
     on.render(own, 60, 80)
     assert on.palette is not pal_big
+
+
+def test_bfloat16_decoding_setting(stylized):
+    from dataclasses import replace
+
+    cam = Cameras.identity(stylized.photo.fov_y_deg)
+    before = stylized.settings
+    try:
+        stylized.settings = replace(before, bfloat16=False)
+        ref = stylized.render(cam, 48, 64)
+        stylized.settings = replace(before, bfloat16=True)
+        assert stylized.settings.decode_bfloat16
+        out = stylized.render(cam, 48, 64)
+    finally:
+        stylized.settings = before
+    assert out.dtype == np.float32 and np.isfinite(out).all()
+    mse = float(np.mean((out.astype(np.float64) - ref) ** 2))
+    assert 0 < mse and 10 * np.log10(1 / mse) > 40  # the same frame up to bfloat16 rounding
+    with pytest.raises(InputError, match="bfloat16"):
+        StylizeSettings(bfloat16="yes")

@@ -4,7 +4,8 @@ The reference is the full-quality float32 render: every point, supersample 1,
 the preset's frame size, torch's default threads, the decoder's channels-last
 layout, full-size decoding. Each variant changes one knob (point budget, render resolution,
 split-resolution decoding (``StylizeSettings.decode_scale``: the U-Net at 1/2 or 1/4 per side, the
-detail colours at full size), supersampling, bfloat16 autocast of the decoder / the style CNN, the decoder's
+detail colours at full size), supersampling, bfloat16 decoding (``StylizeSettings.bfloat16``; the reference is float32) / a bfloat16
+autocast of the style CNN, the decoder's
 memory layout, threads) and is compared with the reference on the same
 cameras: PSNR and the EfficientNet perceptual distance
 (``eval.consistency.masked_feature_distance`` with a full mask: unit-normalised
@@ -40,6 +41,7 @@ import numpy as np
 import torch
 
 from ..eval.timing import median_time
+from ..models.decoder import native_bfloat16
 from .report import pareto_front, scatter_plot, write_table
 
 Log = Callable[[str], None]
@@ -106,7 +108,7 @@ def variants(quick: bool) -> List[Variant]:
     if quick:
         out += [Variant("bfloat16 decoder + style CNN", "bfloat16", bf16_decoder=True, bf16_style=True)]
     else:
-        out += [Variant("bfloat16 decoder", "bfloat16", bf16_decoder=True, slow=True),
+        out += [Variant("bfloat16 decoder", "bfloat16", bf16_decoder=True, slow=not native_bfloat16()),
                 Variant("bfloat16 style CNN", "bfloat16", bf16_style=True)]
     out += [Variant("channels-first (NCHW) decoder", "channels-last", channels_first=True)]
     out += [Variant("1 thread", "threads", threads=1)]
@@ -165,7 +167,7 @@ class SpeedScene:
 
     @contextlib.contextmanager
     def stylized(self, supersample: int = 1, per_pixel: float = 3.0, decode_scale: int = 1,
-                 final_per_pixel: Optional[float] = None):
+                 final_per_pixel: Optional[float] = None, bfloat16: bool = False):
         """The one ``Stylized3DPhoto`` of the scene, with these settings while the context lasts (its
         settings are read at render time, so the cached geometry and features are shared by every variant)."""
         from ..stylize import Stylized3DPhoto
@@ -177,7 +179,7 @@ class SpeedScene:
         before = s.settings
         s.settings = replace(before, supersample=supersample, preview_points_per_pixel=per_pixel,
                              decode_scale=decode_scale, preview_decode_scale=decode_scale,
-                             final_points_per_pixel=final_per_pixel)
+                             final_points_per_pixel=final_per_pixel, bfloat16=bfloat16)
         try:
             yield s
         finally:
@@ -227,7 +229,8 @@ class VariantRun:
         v = self.v
         self._stack = contextlib.ExitStack()
         self.s = self._stack.enter_context(self.scene.stylized(v.supersample, v.preview_points_per_pixel or 3.0,
-                                                               v.decode_scale, v.final_points_per_pixel))
+                                                               v.decode_scale, v.final_points_per_pixel,
+                                                               v.bf16_decoder))
         self._threads = torch.get_num_threads()
         self._config = self.s.model.decoder.config
         if v.threads is not None:
@@ -255,12 +258,10 @@ class VariantRun:
         style_feature_cache(self.scene.style_encoder).clear()
         with _bf16(self.v.bf16_style):
             self.s.set_style(self.scene.style)
-        with _bf16(self.v.bf16_decoder):
-            self.s.render(self.cameras[0], *self.hw, preview=self.preview)
+        self.s.render(self.cameras[0], *self.hw, preview=self.preview)
 
     def frames(self) -> None:
-        with _bf16(self.v.bf16_decoder):
-            self.last = [self.s.render(c, *self.hw, preview=self.preview) for c in self.cameras]
+        self.last = [self.s.render(c, *self.hw, preview=self.preview) for c in self.cameras]
 
     def output(self) -> List[np.ndarray]:
         """The last frames at the reference's size (bilinear upscaling of a smaller render)."""

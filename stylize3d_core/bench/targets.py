@@ -29,7 +29,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, List, Optional
 
@@ -118,15 +118,17 @@ def measure(megapixels: float, frame: int, preview: int, video_frames: int, rend
                 s0 = time.perf_counter()
                 st.render(c, H, W)
                 full.append(time.perf_counter() - s0)
-                if k < 3:
+                if k < 3:  # against the full-quality float32 frame (the default may decode in bfloat16)
+                    default, st.settings = st.settings, replace(st.settings, bfloat16=False)
                     prev_db.append(_psnr(p, st.render(c, Hp, Wp)))
+                    st.settings = default
             out.update({"preview": [Hp, Wp], "preview_ms": 1000 * float(np.median(prev)),
                         "full_ms": 1000 * float(np.median(full)), "preview_psnr_db": float(np.mean(prev_db))})
             # the export default (RenderJob's settings) against the full-quality float32 frame
             job = RenderJob()
             export = StylizeSettings(strength=st.settings.strength, supersample=job.supersample,
                                      final_points_per_pixel=job.points_per_pixel)
-            reference = StylizeSettings(strength=st.settings.strength, supersample=1)
+            reference = StylizeSettings(strength=st.settings.strength, supersample=1, bfloat16=False)
             final_db = []
             for k in range(2):
                 c = cams[(11 * k + 5) % len(cams)]
@@ -136,6 +138,7 @@ def measure(megapixels: float, frame: int, preview: int, video_frames: int, rend
                 final_db.append(min(_psnr(st.render(c, H, W), ref), 1e9))
             out["export_psnr_db"] = float(np.mean(final_db)) if max(final_db) < 1e9 else math.inf
             out["export_settings"] = repr(export)
+            out["bfloat16"] = export.decode_bfloat16
             full_export = []
             for k in range(renders):
                 c = cams[(7 * k + 3) % len(cams)]
@@ -209,6 +212,8 @@ def run_targets(out: Path, quick: bool = False, show_progress: bool = False, log
         f"its stages (s): {stages}; not counted, like the model's loading: importing open3d.core "
         f"(the geometry's k-NN) {one['open3d_import_s']:.2f} s, once per process (the viewer has it loaded)",
         f"export default: {one['export_settings']}; peak memory at 1 MP {one['peak_rss_gib']:.2f} GiB",
+        "decoder in bfloat16 (StylizeSettings.bfloat16 None: this CPU computes bfloat16 natively): "
+        f"{'yes' if one.get('bfloat16') else 'no'}; the references of the error rows are float32",
         "before (issue): the figures in brackets of issue 12's targets (benchmarks/bench_stylize.py)"])
     log("targets: " + "; ".join(f"{r['what'].split(',')[0]} {r['measured']:.3g} {r['unit']}" for r in rows))
     return rows

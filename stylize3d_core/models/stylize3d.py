@@ -209,7 +209,7 @@ class Stylize3DModel(nn.Module):
     def render_view(
         self, dense: torch.Tensor, xyz: torch.Tensor, camera: Cameras, height: int, width: int,
         supersample: int = 1, should_stop: Optional[Callable[[], bool]] = None, *,
-        decode_scale: int = 1,
+        decode_scale: int = 1, bfloat16: bool = False,
     ) -> Tuple[torch.Tensor, Fragments]:
         """Decode one view: (3, H, W) RGB in (0, 1) and the rasterizer's fragments.
 
@@ -222,20 +222,23 @@ class Stylize3DModel(nn.Module):
         ``models/decoder.py``): the view is rasterized once at (H, W); the U-Net decodes its features
         pooled to (ceil(H / s), ceil(W / s)) (:func:`~stylize3d_core.models.decoder.pool_features`), and
         its outputs, upsampled, recolour the full-size detail colours.
+
+        ``bfloat16``: the decoder runs under a bfloat16 autocast (inference only; see
+        ``UNetDecoder.forward``); the rasterizer stays float32 and the result is float32.
         """
         if isinstance(decode_scale, bool) or not isinstance(decode_scale, int) or not 1 <= decode_scale <= 8:
             raise InputError("decode_scale", f"must be an integer from 1 to 8, got {decode_scale!r}")
         settings = RasterSettings(height=int(height), width=int(width), supersample=supersample)
         if decode_scale > 1:
-            return self._render_split(dense, xyz, camera, settings, decode_scale, should_stop)
+            return self._render_split(dense, xyz, camera, settings, decode_scale, should_stop, bfloat16)
         frags = PointRasterizer(settings)(xyz, dense, camera, should_stop=should_stop)
         features = frags.image.unsqueeze(0)  # (1, Cr, H, W)
         mask = (~frags.hole).to(features.dtype)[None, None]  # (1, 1, H, W)
-        rgb = self.decoder(features, mask, should_stop=should_stop)[0]  # (3, H, W)
+        rgb = self.decoder(features, mask, should_stop=should_stop, bfloat16=bfloat16)[0]  # (3, H, W)
         return rgb, frags
 
     def _render_split(self, dense: torch.Tensor, xyz: torch.Tensor, camera: Cameras, settings: RasterSettings,
-                      scale: int, should_stop) -> Tuple[torch.Tensor, Fragments]:
+                      scale: int, should_stop, bfloat16: bool = False) -> Tuple[torch.Tensor, Fragments]:
         """``render_view`` with split-resolution decoding (``decode_scale`` > 1)."""
         d = self.config.decoder.transform_channels
         if not d or self.config.decoder.supersample:
@@ -245,7 +248,8 @@ class Stylize3DModel(nn.Module):
         image = frags.image.unsqueeze(0)  # (1, Cr + D, H, W), channels-last
         coverage = (~frags.hole).to(image.dtype)[None, None]  # (1, 1, H, W)
         features, mask = pool_features(image, coverage, scale)  # (1, Cr + D, h, w), (1, 1, h, w)
-        rgb = self.decoder(features, mask, should_stop=should_stop, detail=(image[:, -d:], coverage))[0]
+        rgb = self.decoder(features, mask, should_stop=should_stop, detail=(image[:, -d:], coverage),
+                           bfloat16=bfloat16)[0]
         return rgb, frags
 
 

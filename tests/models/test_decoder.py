@@ -245,3 +245,29 @@ def test_texture_residual_config_checks():
     with pytest.raises(InputError, match="texture_channels"):
         DecoderConfig(in_channels=11, width=16, transform_channels=3, texture_channels=1)
     assert DecoderConfig.lite(in_channels=35, transform_channels=3, texture_channels=3).texture_channels == 3
+
+
+def test_bfloat16_decoding_is_float32_out_and_close_to_float32():
+    torch.manual_seed(1)
+    dec = UNetDecoder(DecoderConfig.lite(in_channels=16, transform_channels=3, texture_channels=3))
+    feats, mask = _inputs(1, 16, 40, 36)
+    with torch.inference_mode():
+        ref = dec(feats, mask)
+        out = dec(feats, mask, bfloat16=True)
+        stopped = dec(feats, mask, lambda: False, bfloat16=True)  # the strips run under the autocast too
+    assert out.dtype == torch.float32 and out.shape == ref.shape and torch.isfinite(out).all()
+    err = (out - ref).abs()
+    assert 0 < float(err.max()) < 0.03 and float(err.mean()) < 4e-3  # bfloat16's 8-bit mantissa, not another image
+    torch.testing.assert_close(stopped, out, rtol=0, atol=2e-2)
+
+
+def test_bfloat16_decoding_is_for_inference_only(lite):
+    feats, mask = _inputs(1, 16, 8, 8)
+    with pytest.raises(InputError, match="bfloat16"):
+        lite(feats, mask, bfloat16=True)
+
+
+def test_native_bfloat16_is_a_bool():
+    from stylize3d_core.models.decoder import native_bfloat16
+
+    assert native_bfloat16() in (True, False)
