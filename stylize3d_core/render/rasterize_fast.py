@@ -1,0 +1,263 @@
+"""Compiled inference path of :func:`~stylize3d_core.render.rasterize.rasterize_points` (Numba).
+
+The common case of inference, bilinear splats (no point sizes) at supersample 1 without
+``soft_edges`` or ``blend_coverage``, float32 on the CPU, without gradients, is the same
+computation as the tensor path, done in four passes over the points that keep nothing
+per entry:
+
+1. z-buffers: per pixel the least depth of every tap and of the front-setting taps
+   (weight >= the hole threshold); the front is the latter where there is one;
+2. counts: the kept taps per pixel (``zfront / tol <= z <= zfront * tol``);
+3. bags: each kept tap's point index and splat weight, written pixel-major (a counting
+   sort: within a pixel the taps keep the points' order);
+4. per pixel, the weight sum (in bag order), the hole test and the normalised weights;
+   then the features are summed per bag by ``torch.nn.functional.embedding_bag``.
+
+A tap's position and weight come from the same float32 formulas as the tensor path's
+(``u = fx * x / max(z, 1e-8) + cx``, ``a = u - 0.5``, weights ``1 - |x0 + dx - a|``),
+so both keep the same taps; the sums differ by float rounding only (their order differs;
+``tests/render/test_rasterize_fast.py`` checks the two against each other). The result does
+not depend on the chunking or on the number of threads: the z-buffers are a min, the
+counts integers, and the bags hold each pixel's taps in point order.
+
+Passes 1-3 run in parts of the points on :data:`THREADS` threads (the kernels release
+the GIL); with ``should_stop``, each pass runs in chunks of points with the check before
+each. The kernels are compiled on first use and cached on disk (Numba's ``cache=True``).
+Where Numba cannot be imported, :func:`available` is False and the tensor path runs.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from concurrent.futures import ThreadPoolExecutor
+from typing import Callable, List, Optional, Tuple
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+THREADS = 2
+"""Threads of passes 1-3 (at most torch's thread count)."""
+
+EPS = 1e-8
+"""Smallest depth in the projection's division (``geometry.camera.project``'s ``eps``)."""
+
+
+@functools.lru_cache(maxsize=None)
+def _kernels():
+    """The compiled kernels (None where Numba is missing or fails to compile)."""
+    try:
+        import numba
+    except Exception:  # noqa: BLE001 (any failure to import means: no compiled path)
+        return None
+    jit = numba.njit(cache=True, nogil=True)
+
+    @numba.njit(inline="always")
+    def taps(pc, i, fx, fy, cx, cy, H, W, near):
+        """Corner 00 (x0, y0), the fractional parts' tap weights and z of point i; x0 = -2**30 if culled."""
+        one, half = np.float32(1.0), np.float32(0.5)
+        z = pc[2, i]
+        if not (z > near and z < np.float32(np.inf)):
+            return -(1 << 30), 0, z, one, one, one, one
+        zs = z if z > np.float32(EPS) else np.float32(EPS)
+        a = fx * pc[0, i] / zs + cx - half
+        b = fy * pc[1, i] / zs + cy - half
+        if not (a > -one and a < np.float32(W) and b > -one and b < np.float32(H)):
+            return -(1 << 30), 0, z, one, one, one, one
+        x0f, y0f = np.floor(a), np.floor(b)
+        wx0 = max(one - abs(x0f - a), np.float32(0.0))
+        wx1 = max(one - abs(x0f + one - a), np.float32(0.0))
+        wy0 = max(one - abs(y0f - b), np.float32(0.0))
+        wy1 = max(one - abs(y0f + one - b), np.float32(0.0))
+        return int(x0f), int(y0f), z, wx0, wx1, wy0, wy1
+
+    @jit
+    def zbuffers(pc, lo, hi, fx, fy, cx, cy, H, W, near, strong, zbuf, zfront):
+        for i in range(lo, hi):
+            x0, y0, z, wx0, wx1, wy0, wy1 = taps(pc, i, fx, fy, cx, cy, H, W, near)
+            if x0 == -(1 << 30):
+                continue
+            for dy in range(2):
+                yy = y0 + dy
+                wy = wy0 if dy == 0 else wy1
+                if yy < 0 or yy >= H:
+                    continue
+                for dx in range(2):
+                    xx = x0 + dx
+                    w = wy * (wx0 if dx == 0 else wx1)
+                    if xx < 0 or xx >= W or not w > 0:
+                        continue
+                    q = yy * W + xx
+                    if z < zbuf[q]:
+                        zbuf[q] = z
+                    if w >= strong and z < zfront[q]:
+                        zfront[q] = z
+
+    @jit
+    def count(pc, lo, hi, fx, fy, cx, cy, H, W, near, tol, front, counts):
+        for i in range(lo, hi):
+            x0, y0, z, wx0, wx1, wy0, wy1 = taps(pc, i, fx, fy, cx, cy, H, W, near)
+            if x0 == -(1 << 30):
+                continue
+            for dy in range(2):
+                yy = y0 + dy
+                wy = wy0 if dy == 0 else wy1
+                if yy < 0 or yy >= H:
+                    continue
+                for dx in range(2):
+                    xx = x0 + dx
+                    w = wy * (wx0 if dx == 0 else wx1)
+                    if xx < 0 or xx >= W or not w > 0:
+                        continue
+                    q = yy * W + xx
+                    f = front[q]
+                    if z <= f * tol and z * tol >= f:
+                        counts[q] += 1
+
+    @jit
+    def fill(pc, lo, hi, fx, fy, cx, cy, H, W, near, tol, front, pos, index, weight):
+        for i in range(lo, hi):
+            x0, y0, z, wx0, wx1, wy0, wy1 = taps(pc, i, fx, fy, cx, cy, H, W, near)
+            if x0 == -(1 << 30):
+                continue
+            for dy in range(2):
+                yy = y0 + dy
+                wy = wy0 if dy == 0 else wy1
+                if yy < 0 or yy >= H:
+                    continue
+                for dx in range(2):
+                    xx = x0 + dx
+                    w = wy * (wx0 if dx == 0 else wx1)
+                    if xx < 0 or xx >= W or not w > 0:
+                        continue
+                    q = yy * W + xx
+                    f = front[q]
+                    if z <= f * tol and z * tol >= f:
+                        k = pos[q]
+                        index[k] = i
+                        weight[k] = w
+                        pos[q] = k + 1
+
+    @jit
+    def normalise(offsets, weight, threshold, wsum):
+        """Per bag: the weight sum (in bag order), then weights / sum (0 where the sum is below threshold)."""
+        for q in range(offsets.shape[0] - 1):
+            s = np.float32(0.0)
+            for k in range(offsets[q], offsets[q + 1]):
+                s += weight[k]
+            wsum[q] = s
+            inv = np.float32(0.0) if s < threshold else np.float32(1.0) / s
+            for k in range(offsets[q], offsets[q + 1]):
+                weight[k] *= inv
+
+    return zbuffers, count, fill, normalise
+
+
+def available() -> bool:
+    """Whether the compiled path can run (Numba imports)."""
+    return _kernels() is not None
+
+
+def applies(points_cam: torch.Tensor, features: torch.Tensor, settings, point_size) -> bool:
+    """Whether :func:`rasterize_fast` computes this call (else the tensor path does)."""
+    return (ENABLED and point_size is None and settings.supersample == 1 and not settings.soft_edges
+            and not settings.blend_coverage and features.dtype == torch.float32
+            and points_cam.dtype == torch.float32 and features.device.type == "cpu"
+            and points_cam.device.type == "cpu" and not (torch.is_grad_enabled() and features.requires_grad)
+            and available())
+
+
+ENABLED = True
+"""False: :func:`~stylize3d_core.render.rasterize.rasterize_points` always takes the tensor path
+(benchmarks compare the two)."""
+
+_POOL: Optional[ThreadPoolExecutor] = None
+
+
+def _pool() -> ThreadPoolExecutor:
+    global _POOL
+    if _POOL is None:
+        _POOL = ThreadPoolExecutor(THREADS, thread_name_prefix="stylize3d-raster")
+    return _POOL
+
+
+def _parts(n: int, k: int) -> List[Tuple[int, int]]:
+    """k contiguous ranges covering range(n) (empty ones dropped; one (0, 0) if n == 0)."""
+    bounds = [n * i // k for i in range(k + 1)]
+    return [(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a] or [(0, 0)]
+
+
+def rasterize_fast(points_cam: torch.Tensor, features: torch.Tensor, K: torch.Tensor, settings,
+                   should_stop: Optional[Callable[[], bool]] = None, chunk_points: Optional[int] = None):
+    """(image (H, W, C), weight (H*W,), depth (H*W,), hole (H*W,)) as the tensor path computes them
+    (``applies`` must hold; inputs checked by the caller)."""
+    from ..errors import RenderInterrupted
+
+    zbuffers, count, fill, normalise = _kernels()  # noqa: F841 (unpacked for the passes)
+    H, W = settings.height, settings.width
+    n_pix = H * W
+    N, C = features.shape
+    pc = points_cam.detach().t().contiguous().numpy()  # (3, N): a no-copy view for column-laid points
+    Kd = K.detach().to(torch.float32)
+    fx, fy, cx, cy = (np.float32(float(v)) for v in (Kd[0, 0], Kd[1, 1], Kd[0, 2], Kd[1, 2]))
+    near = np.float32(settings.near_clip)
+    tol = np.float32(1.0 + settings.depth_tolerance)  # as the tensor path's float32 products
+    strong = np.float32(settings.hole_weight_threshold)
+    threads = max(1, min(THREADS, torch.get_num_threads()))
+    if should_stop is not None and chunk_points:
+        threads = min(threads, int(chunk_points))  # a round holds about chunk_points points in all
+    parts = _parts(N, threads)
+
+    def run(kernel, make_args):
+        """``kernel`` over every part's points: with ``should_stop``, in rounds of about ``chunk_points``
+        points (shared by the parts), the check before each round; else in one round."""
+        longest = max(b - a for a, b in parts)
+        step = max(1, longest) if should_stop is None else max(1, -(-int(chunk_points or N or 1) // len(parts)))
+        rounds = max(1, -(-longest // step))
+        for k in range(rounds):
+            if should_stop is not None and should_stop():
+                raise RenderInterrupted("render stopped while rasterizing")
+            jobs = [(t, a + k * step, min(b, a + (k + 1) * step)) for t, (a, b) in enumerate(parts)]
+            jobs = [j for j in jobs if j[2] > j[1]]
+            if len(jobs) == 1:
+                t, a, b = jobs[0]
+                kernel(pc, a, b, *make_args(t))
+            elif jobs:
+                for f in [_pool().submit(kernel, pc, a, b, *make_args(t)) for t, a, b in jobs]:
+                    f.result()
+
+    inf = np.float32(np.inf)
+    zbuf = [np.full(n_pix, inf, np.float32) for _ in parts]
+    zfront = [np.full(n_pix, inf, np.float32) for _ in parts]
+    run(zbuffers, lambda t: (fx, fy, cx, cy, H, W, near, strong, zbuf[t], zfront[t]))
+    zb, zf = functools.reduce(np.minimum, zbuf), functools.reduce(np.minimum, zfront)
+    front = np.where(zf < inf, zf, zb)  # (HW,) each pixel's front depth
+
+    counts = [np.zeros(n_pix, np.int64) for _ in parts]
+    run(count, lambda t: (fx, fy, cx, cy, H, W, near, tol, front, counts[t]))
+    total = functools.reduce(np.add, counts)
+    offsets = np.zeros(n_pix + 1, np.int64)
+    np.cumsum(total, out=offsets[1:])
+    E = int(offsets[-1])
+    index = np.empty(E, np.int64)
+    weight = np.empty(E, np.float32)
+    pos, start = [], offsets[:-1].copy()
+    for c in counts:  # part t writes after the taps of parts before it: each bag in point order
+        pos.append(start.copy())
+        start += c
+    run(fill, lambda t: (fx, fy, cx, cy, H, W, near, tol, front, pos[t], index, weight))
+
+    if should_stop is not None and should_stop():
+        raise RenderInterrupted("render stopped while rasterizing")
+    wsum = np.empty(n_pix, np.float32)
+    normalise(offsets, weight, strong, wsum)
+    table = features.detach()
+    table = table if table.is_contiguous() else table.contiguous()
+    with torch.no_grad():
+        out = F.embedding_bag(torch.from_numpy(index), table, torch.from_numpy(offsets), mode="sum",
+                              per_sample_weights=torch.from_numpy(weight), include_last_offset=True)  # (HW, C)
+    wsum_t = torch.from_numpy(wsum)
+    hole = wsum_t < settings.hole_weight_threshold
+    depth = torch.from_numpy(front)
+    return out, wsum_t, torch.where(hole, math.inf, depth), hole
