@@ -87,6 +87,7 @@ The strips give the unstripped result up to float rounding (within 1e-6,
 
 from __future__ import annotations
 
+import contextlib
 import functools
 from dataclasses import dataclass
 from typing import Callable, List, Optional, Tuple
@@ -352,12 +353,13 @@ def _layer(conv: nn.Module, x: torch.Tensor, should_stop: StopCheck,
 
 
 def _assemble(features: torch.Tensor, mask: torch.Tensor, multiple: int, channels_last: bool,
-              should_stop: StopCheck) -> torch.Tensor:
+              should_stop: StopCheck, dtype: Optional[torch.dtype] = None) -> torch.Tensor:
     """``[features | mask]`` zero-padded to a multiple of ``multiple`` (B, C + 1, Hp, Wp), NHWC with
-    ``channels_last``; with ``should_stop``, copied in strips of rows with a check before each."""
+    ``channels_last``, in ``dtype`` (default the features'); with ``should_stop``, copied in strips of
+    rows with a check before each."""
     b, c, h, w = features.shape
     hp, wp = h + (-h) % multiple, w + (-w) % multiple
-    x = torch.empty((b, c + 1, hp, wp), dtype=features.dtype, device=features.device,
+    x = torch.empty((b, c + 1, hp, wp), dtype=dtype or features.dtype, device=features.device,
                     memory_format=torch.channels_last if channels_last else torch.contiguous_format)
     if hp > h or wp > w:  # the padding: holes (features 0, mask 0)
         x[:, :, h:].zero_()
@@ -516,11 +518,8 @@ class UNetDecoder(nn.Module):
 
         ``bfloat16``: decode under a CPU bfloat16 autocast (inference; see the module docstring);
         the result is float32 either way."""
-        if bfloat16:
-            if torch.is_grad_enabled():
-                raise InputError("bfloat16", "bfloat16 decoding is for inference (run under torch.inference_mode())")
-            with torch.autocast("cpu", dtype=torch.bfloat16):
-                return self.forward(features, mask, should_stop, detail=detail).float()
+        if bfloat16 and torch.is_grad_enabled():
+            raise InputError("bfloat16", "bfloat16 decoding is for inference (run under torch.inference_mode())")
         self._check(features, mask)
         if detail is not None:
             detail = self._check_detail(features, detail)
@@ -529,24 +528,32 @@ class UNetDecoder(nn.Module):
             features, mask = supersample_pool(features, mask)
         h, w = features.shape[-2:]
         colours = features[:, -self.config.transform_channels:] if self.transform is not None else None
-        x = _assemble(features, mask, 2**self.config.levels, self.config.channels_last, should_stop)  # (B, C_in+1, Hp, Wp)
-        skips: List[torch.Tensor] = []
-        for skip, down in zip(self.skips, self.downs):
-            skips.append(_layer(skip, x, should_stop))
-            x = down(x, should_stop)
-        coarse = x  # (B, width, Hp / 2**levels, Wp / 2**levels)
-        for i in reversed(range(self.config.levels)):
-            x = self.ups[i](x, skips[i], should_stop)
-        x = _layer(self.out_conv, x, should_stop, F.relu)
-        y = _layer(self.out_rgb, x, should_stop)[..., :h, :w]  # (B, 3 + texture_channels, H, W)
+        # bfloat16: the U-Net's convolutions under the autocast, from an input assembled in bfloat16;
+        # its outputs back in float32 for the heads (sigmoid, tanh, the per-pixel colour matrices)
+        amp = torch.autocast("cpu", dtype=torch.bfloat16) if bfloat16 else contextlib.nullcontext()
+        with amp:
+            x = _assemble(features, mask, 2**self.config.levels, self.config.channels_last, should_stop,
+                          torch.bfloat16 if bfloat16 else None)  # (B, C_in+1, Hp, Wp)
+            skips: List[torch.Tensor] = []
+            for skip, down in zip(self.skips, self.downs):
+                skips.append(_layer(skip, x, should_stop))
+                x = down(x, should_stop)
+            coarse = x  # (B, width, Hp / 2**levels, Wp / 2**levels)
+            for i in reversed(range(self.config.levels)):
+                x = self.ups[i](x, skips[i], should_stop)
+            x = _layer(self.out_conv, x, should_stop, F.relu)
+            y = _layer(self.out_rgb, x, should_stop)[..., :h, :w].to(features.dtype)  # (B, 3 + texture, H, W)
+            coefficients = None
+            if self.transform is not None:
+                coefficients = None if torch.is_grad_enabled() else constant_transform(self.transform)
+                if coefficients is None:
+                    gain = self.config.transform_gain
+                    coefficients = _layer(self.transform, coarse * gain if gain != 1.0 else coarse,
+                                          should_stop).to(features.dtype)
         rgb = torch.sigmoid(y[:, :3])  # (B, 3, H, W)
         texture = TEXTURE_SCALE * torch.tanh(y[:, 3:]) if self.config.texture_channels else None
         if self.transform is not None:
             padded = (coarse.shape[-2] * 2**self.config.levels, coarse.shape[-1] * 2**self.config.levels)
-            coefficients = None if torch.is_grad_enabled() else constant_transform(self.transform)
-            if coefficients is None:
-                gain = self.config.transform_gain
-                coefficients = _layer(self.transform, coarse * gain if gain != 1.0 else coarse, should_stop)
             _stop(should_stop)
             if detail is not None:  # the U-Net's outputs at the decoding size, upsampled to the detail's
                 colours, mask = detail
