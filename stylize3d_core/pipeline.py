@@ -273,6 +273,9 @@ def prefetch_style(style_rgb: np.ndarray, encoder=None) -> Future:
     includes the autocast state, which is per thread: under a caller's autocast the features are simply
     computed again. ``result()`` re-raises the worker's error.
     """
+    from .render.rasterize_fast import warm_up_async
+
+    warm_up_async()  # the rasterizer's compiled kernels load meanwhile too
     pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="style-cnn")
     try:
         return pool.submit(_style_features, style_rgb, encoder)

@@ -51,6 +51,7 @@ from .models.scene_geometry import SceneGeometry, prepare_geometry
 from .models.stylize3d import Stylize3DModel
 from .points.sampling import start_fps_process
 from .render.plain import StratifiedOrder, preview_point_count
+from .render.rasterize_fast import warm_up_async
 from .render.rasterizer import columns
 from .scene.photo3d import Photo3D
 
@@ -208,6 +209,7 @@ class Stylized3DPhoto:
         self.timings: Dict[str, float] = {}
         self._style_encoder = style_encoder
         start_fps_process()  # a no-op when it runs already (load_photo3d starts it)
+        warm_up_async()  # the rasterizer's compiled kernels load while the geometry is built
         t0 = time.perf_counter()
         pts = photo.points.to_tensors()
         with torch.inference_mode():

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import functools
 import math
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from typing import Callable, List, Optional, Tuple
 
@@ -40,118 +41,45 @@ import torch.nn.functional as F
 THREADS = 2
 """Threads of passes 1-3 (at most torch's thread count)."""
 
-EPS = 1e-8
-"""Smallest depth in the projection's division (``geometry.camera.project``'s ``eps``)."""
-
 
 @functools.lru_cache(maxsize=None)
 def _kernels():
-    """The compiled kernels (None where Numba is missing or fails to compile)."""
+    """The compiled kernels (None where Numba is missing or fails to import)."""
     try:
-        import numba
+        from . import _raster_kernels as k
     except Exception:  # noqa: BLE001 (any failure to import means: no compiled path)
         return None
-    jit = numba.njit(cache=True, nogil=True)
+    return k.zbuffers, k.count, k.fill, k.normalise
 
-    @numba.njit(inline="always")
-    def taps(pc, i, fx, fy, cx, cy, H, W, near):
-        """Corner 00 (x0, y0), the fractional parts' tap weights and z of point i; x0 = -2**30 if culled."""
-        one, half = np.float32(1.0), np.float32(0.5)
-        z = pc[2, i]
-        if not (z > near and z < np.float32(np.inf)):
-            return -(1 << 30), 0, z, one, one, one, one
-        zs = z if z > np.float32(EPS) else np.float32(EPS)
-        a = fx * pc[0, i] / zs + cx - half
-        b = fy * pc[1, i] / zs + cy - half
-        if not (a > -one and a < np.float32(W) and b > -one and b < np.float32(H)):
-            return -(1 << 30), 0, z, one, one, one, one
-        x0f, y0f = np.floor(a), np.floor(b)
-        wx0 = max(one - abs(x0f - a), np.float32(0.0))
-        wx1 = max(one - abs(x0f + one - a), np.float32(0.0))
-        wy0 = max(one - abs(y0f - b), np.float32(0.0))
-        wy1 = max(one - abs(y0f + one - b), np.float32(0.0))
-        return int(x0f), int(y0f), z, wx0, wx1, wy0, wy1
 
-    @jit
-    def zbuffers(pc, lo, hi, fx, fy, cx, cy, H, W, near, strong, zbuf, zfront):
-        for i in range(lo, hi):
-            x0, y0, z, wx0, wx1, wy0, wy1 = taps(pc, i, fx, fy, cx, cy, H, W, near)
-            if x0 == -(1 << 30):
-                continue
-            for dy in range(2):
-                yy = y0 + dy
-                wy = wy0 if dy == 0 else wy1
-                if yy < 0 or yy >= H:
-                    continue
-                for dx in range(2):
-                    xx = x0 + dx
-                    w = wy * (wx0 if dx == 0 else wx1)
-                    if xx < 0 or xx >= W or not w > 0:
-                        continue
-                    q = yy * W + xx
-                    if z < zbuf[q]:
-                        zbuf[q] = z
-                    if w >= strong and z < zfront[q]:
-                        zfront[q] = z
+_WARM: Optional[threading.Thread] = None
 
-    @jit
-    def count(pc, lo, hi, fx, fy, cx, cy, H, W, near, tol, front, counts):
-        for i in range(lo, hi):
-            x0, y0, z, wx0, wx1, wy0, wy1 = taps(pc, i, fx, fy, cx, cy, H, W, near)
-            if x0 == -(1 << 30):
-                continue
-            for dy in range(2):
-                yy = y0 + dy
-                wy = wy0 if dy == 0 else wy1
-                if yy < 0 or yy >= H:
-                    continue
-                for dx in range(2):
-                    xx = x0 + dx
-                    w = wy * (wx0 if dx == 0 else wx1)
-                    if xx < 0 or xx >= W or not w > 0:
-                        continue
-                    q = yy * W + xx
-                    f = front[q]
-                    if z <= f * tol and z * tol >= f:
-                        counts[q] += 1
 
-    @jit
-    def fill(pc, lo, hi, fx, fy, cx, cy, H, W, near, tol, front, pos, index, weight):
-        for i in range(lo, hi):
-            x0, y0, z, wx0, wx1, wy0, wy1 = taps(pc, i, fx, fy, cx, cy, H, W, near)
-            if x0 == -(1 << 30):
-                continue
-            for dy in range(2):
-                yy = y0 + dy
-                wy = wy0 if dy == 0 else wy1
-                if yy < 0 or yy >= H:
-                    continue
-                for dx in range(2):
-                    xx = x0 + dx
-                    w = wy * (wx0 if dx == 0 else wx1)
-                    if xx < 0 or xx >= W or not w > 0:
-                        continue
-                    q = yy * W + xx
-                    f = front[q]
-                    if z <= f * tol and z * tol >= f:
-                        k = pos[q]
-                        index[k] = i
-                        weight[k] = w
-                        pos[q] = k + 1
+def warm_up_async() -> None:
+    """Import Numba and load (or, the first time on a machine, compile) the kernels in a daemon thread,
+    once per process, so the first frame does not wait for them; the stages that call this (the style
+    prefetch, ``Stylized3DPhoto``) run while the photo's depth, LDI or geometry are being built."""
+    global _WARM
+    with _WARM_LOCK:
+        if _WARM is None:
+            _WARM = threading.Thread(target=_warm_up, name="stylize3d-raster-warm-up", daemon=True)
+            _WARM.start()
 
-    @jit
-    def normalise(offsets, weight, threshold, wsum):
-        """Per bag: the weight sum (in bag order), then weights / sum (0 where the sum is below threshold)."""
-        for q in range(offsets.shape[0] - 1):
-            s = np.float32(0.0)
-            for k in range(offsets[q], offsets[q + 1]):
-                s += weight[k]
-            wsum[q] = s
-            inv = np.float32(0.0) if s < threshold else np.float32(1.0) / s
-            for k in range(offsets[q], offsets[q + 1]):
-                weight[k] *= inv
 
-    return zbuffers, count, fill, normalise
+def _warm_up() -> None:
+    try:
+        if not available():
+            return
+        K = torch.tensor([[2.0, 0.0, 1.0], [0.0, 2.0, 1.0], [0.0, 0.0, 1.0]])
+        from .rasterize import RasterSettings
+
+        with torch.inference_mode():  # one point: each kernel runs once with the real argument types
+            rasterize_fast(torch.tensor([[0.0, 0.0, 1.0]]), torch.ones(1, 1), K, RasterSettings(2, 2))
+    except Exception:  # noqa: BLE001 (a failed warm-up is only a slower first frame; the render reports)
+        return
+
+
+_WARM_LOCK = threading.Lock()
 
 
 def available() -> bool:
@@ -194,7 +122,7 @@ def rasterize_fast(points_cam: torch.Tensor, features: torch.Tensor, K: torch.Te
     (``applies`` must hold; inputs checked by the caller)."""
     from ..errors import RenderInterrupted
 
-    zbuffers, count, fill, normalise = _kernels()  # noqa: F841 (unpacked for the passes)
+    zbuffers, count, fill, normalise = _kernels()
     H, W = settings.height, settings.width
     n_pix = H * W
     N, C = features.shape

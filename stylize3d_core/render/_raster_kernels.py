@@ -1,0 +1,119 @@
+"""Numba kernels of :mod:`~stylize3d_core.render.rasterize_fast` (imported by it where Numba imports).
+
+Module-level functions, so Numba's on-disk cache (``cache=True``) finds them again in a new process.
+"""
+
+import numba
+import numpy as np
+
+EPS = 1e-8
+"""Smallest depth in the projection's division (``geometry.camera.project``'s ``eps``)."""
+
+CULLED = -(1 << 30)
+"""The corner :func:`taps` gives a culled point."""
+
+jit = numba.njit(cache=True, nogil=True)
+
+
+@numba.njit(inline="always")
+def taps(pc, i, fx, fy, cx, cy, H, W, near):
+    """Corner 00 (x0, y0), the fractional parts' tap weights and z of point i; x0 = CULLED if culled."""
+    one, half = np.float32(1.0), np.float32(0.5)
+    z = pc[2, i]
+    if not (z > near and z < np.float32(np.inf)):
+        return CULLED, 0, z, one, one, one, one
+    zs = z if z > np.float32(EPS) else np.float32(EPS)
+    a = fx * pc[0, i] / zs + cx - half
+    b = fy * pc[1, i] / zs + cy - half
+    if not (a > -one and a < np.float32(W) and b > -one and b < np.float32(H)):
+        return CULLED, 0, z, one, one, one, one
+    x0f, y0f = np.floor(a), np.floor(b)
+    wx0 = max(one - abs(x0f - a), np.float32(0.0))
+    wx1 = max(one - abs(x0f + one - a), np.float32(0.0))
+    wy0 = max(one - abs(y0f - b), np.float32(0.0))
+    wy1 = max(one - abs(y0f + one - b), np.float32(0.0))
+    return int(x0f), int(y0f), z, wx0, wx1, wy0, wy1
+
+
+@jit
+def zbuffers(pc, lo, hi, fx, fy, cx, cy, H, W, near, strong, zbuf, zfront):
+    for i in range(lo, hi):
+        x0, y0, z, wx0, wx1, wy0, wy1 = taps(pc, i, fx, fy, cx, cy, H, W, near)
+        if x0 == CULLED:
+            continue
+        for dy in range(2):
+            yy = y0 + dy
+            wy = wy0 if dy == 0 else wy1
+            if yy < 0 or yy >= H:
+                continue
+            for dx in range(2):
+                xx = x0 + dx
+                w = wy * (wx0 if dx == 0 else wx1)
+                if xx < 0 or xx >= W or not w > 0:
+                    continue
+                q = yy * W + xx
+                if z < zbuf[q]:
+                    zbuf[q] = z
+                if w >= strong and z < zfront[q]:
+                    zfront[q] = z
+
+
+@jit
+def count(pc, lo, hi, fx, fy, cx, cy, H, W, near, tol, front, counts):
+    for i in range(lo, hi):
+        x0, y0, z, wx0, wx1, wy0, wy1 = taps(pc, i, fx, fy, cx, cy, H, W, near)
+        if x0 == CULLED:
+            continue
+        for dy in range(2):
+            yy = y0 + dy
+            wy = wy0 if dy == 0 else wy1
+            if yy < 0 or yy >= H:
+                continue
+            for dx in range(2):
+                xx = x0 + dx
+                w = wy * (wx0 if dx == 0 else wx1)
+                if xx < 0 or xx >= W or not w > 0:
+                    continue
+                q = yy * W + xx
+                f = front[q]
+                if z <= f * tol and z * tol >= f:
+                    counts[q] += 1
+
+
+@jit
+def fill(pc, lo, hi, fx, fy, cx, cy, H, W, near, tol, front, pos, index, weight):
+    for i in range(lo, hi):
+        x0, y0, z, wx0, wx1, wy0, wy1 = taps(pc, i, fx, fy, cx, cy, H, W, near)
+        if x0 == CULLED:
+            continue
+        for dy in range(2):
+            yy = y0 + dy
+            wy = wy0 if dy == 0 else wy1
+            if yy < 0 or yy >= H:
+                continue
+            for dx in range(2):
+                xx = x0 + dx
+                w = wy * (wx0 if dx == 0 else wx1)
+                if xx < 0 or xx >= W or not w > 0:
+                    continue
+                q = yy * W + xx
+                f = front[q]
+                if z <= f * tol and z * tol >= f:
+                    k = pos[q]
+                    index[k] = i
+                    weight[k] = w
+                    pos[q] = k + 1
+
+
+@jit
+def normalise(offsets, weight, threshold, wsum):
+    """Per bag: the weight sum (in bag order), then weights / sum (0 where the sum is below threshold)."""
+    for q in range(offsets.shape[0] - 1):
+        s = np.float32(0.0)
+        for k in range(offsets[q], offsets[q + 1]):
+            s += weight[k]
+        wsum[q] = s
+        inv = np.float32(0.0) if s < threshold else np.float32(1.0) / s
+        for k in range(offsets[q], offsets[q + 1]):
+            weight[k] *= inv
+
