@@ -20,7 +20,7 @@ so both keep the same taps; the sums differ by float rounding only (their order 
 not depend on the chunking or on the number of threads: the z-buffers are a min, the
 counts integers, and the bags hold each pixel's taps in point order.
 
-Passes 1-3 run in parts of the points on :data:`THREADS` threads (the kernels release
+Passes 1-3 run in parts of the points on :data:`stylize3d_core.threads.THREADS` threads (the kernels release
 the GIL); with ``should_stop``, each pass runs in chunks of points with the check before
 each. The kernels are compiled on first use and cached on disk (Numba's ``cache=True``).
 Where Numba cannot be imported, :func:`available` is False and the tensor path runs.
@@ -31,16 +31,13 @@ from __future__ import annotations
 import functools
 import math
 import threading
-from concurrent.futures import ThreadPoolExecutor
-from typing import Callable, List, Optional, Tuple
+from typing import Callable, Optional
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 
-THREADS = 2
-"""Threads of passes 1-3 (at most torch's thread count)."""
-
+from .. import threads as _threads
 
 @functools.lru_cache(maxsize=None)
 def _kernels():
@@ -100,22 +97,6 @@ ENABLED = True
 """False: :func:`~stylize3d_core.render.rasterize.rasterize_points` always takes the tensor path
 (benchmarks compare the two)."""
 
-_POOL: Optional[ThreadPoolExecutor] = None
-
-
-def _pool() -> ThreadPoolExecutor:
-    global _POOL
-    if _POOL is None:
-        _POOL = ThreadPoolExecutor(THREADS, thread_name_prefix="stylize3d-raster")
-    return _POOL
-
-
-def _parts(n: int, k: int) -> List[Tuple[int, int]]:
-    """k contiguous ranges covering range(n) (empty ones dropped; one (0, 0) if n == 0)."""
-    bounds = [n * i // k for i in range(k + 1)]
-    return [(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a] or [(0, 0)]
-
-
 def rasterize_fast(points_cam: torch.Tensor, features: torch.Tensor, K: torch.Tensor, settings,
                    should_stop: Optional[Callable[[], bool]] = None, chunk_points: Optional[int] = None):
     """(image (H, W, C), weight (H*W,), depth (H*W,), hole (H*W,)) as the tensor path computes them
@@ -132,10 +113,10 @@ def rasterize_fast(points_cam: torch.Tensor, features: torch.Tensor, K: torch.Te
     near = np.float32(settings.near_clip)
     tol = np.float32(1.0 + settings.depth_tolerance)  # as the tensor path's float32 products
     strong = np.float32(settings.hole_weight_threshold)
-    threads = max(1, min(THREADS, torch.get_num_threads()))
+    threads = _threads.threads()
     if should_stop is not None and chunk_points:
         threads = min(threads, int(chunk_points))  # a round holds about chunk_points points in all
-    parts = _parts(N, threads)
+    parts = _threads.parts(N, threads)
 
     def run(kernel, make_args):
         """``kernel`` over every part's points: with ``should_stop``, in rounds of about ``chunk_points``
@@ -148,12 +129,7 @@ def rasterize_fast(points_cam: torch.Tensor, features: torch.Tensor, K: torch.Te
                 raise RenderInterrupted("render stopped while rasterizing")
             jobs = [(t, a + k * step, min(b, a + (k + 1) * step)) for t, (a, b) in enumerate(parts)]
             jobs = [j for j in jobs if j[2] > j[1]]
-            if len(jobs) == 1:
-                t, a, b = jobs[0]
-                kernel(pc, a, b, *make_args(t))
-            elif jobs:
-                for f in [_pool().submit(kernel, pc, a, b, *make_args(t)) for t, a, b in jobs]:
-                    f.result()
+            _threads.run_parts([(kernel, (pc, a, b) + tuple(make_args(t))) for t, a, b in jobs])
 
     inf = np.float32(np.inf)
     zbuf = [np.full(n_pix, inf, np.float32) for _ in parts]

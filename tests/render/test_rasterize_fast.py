@@ -7,6 +7,7 @@ import math
 import pytest
 import torch
 
+from stylize3d_core import threads as threads_module
 from stylize3d_core.errors import RenderInterrupted
 from stylize3d_core.render import rasterize_fast
 from stylize3d_core.render.rasterize import RasterSettings, rasterize_points
@@ -83,7 +84,7 @@ def test_result_does_not_depend_on_chunks_or_threads(threads, chunk, monkeypatch
     settings = RasterSettings(H, W)
     with torch.inference_mode():
         one = rasterize_points(pts, feats, K, settings)
-        monkeypatch.setattr(rasterize_fast, "THREADS", threads)
+        monkeypatch.setattr(threads_module, "THREADS", threads)
         calls = []
         chunked = rasterize_points(pts, feats, K, settings, chunk_points=chunk,
                                    should_stop=lambda: calls.append(1) and False)

@@ -1,0 +1,48 @@
+"""A small shared thread pool for compiled kernels that release the GIL (``render/rasterize_fast.py``):
+work split into contiguous parts of a range, one part per thread."""
+
+from __future__ import annotations
+
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from typing import Callable, List, Optional, Tuple
+
+import torch
+
+THREADS = 2
+"""Threads of the pool (a call uses at most torch's thread count of them)."""
+
+_POOL: Optional[ThreadPoolExecutor] = None
+_LOCK = threading.Lock()
+
+
+def pool() -> ThreadPoolExecutor:
+    global _POOL
+    with _LOCK:
+        if _POOL is None:
+            _POOL = ThreadPoolExecutor(THREADS, thread_name_prefix="stylize3d-kernel")
+        return _POOL
+
+
+def threads() -> int:
+    """Threads a call may use: :data:`THREADS`, at most torch's thread count."""
+    return max(1, min(THREADS, torch.get_num_threads()))
+
+
+def parts(n: int, k: int) -> List[Tuple[int, int]]:
+    """k contiguous ranges covering range(n) (empty ones dropped; one (0, 0) if n == 0)."""
+    bounds = [n * i // k for i in range(k + 1)]
+    return [(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a] or [(0, 0)]
+
+
+def run_parts(jobs: List[Tuple[Callable, tuple]]) -> None:
+    """Run ``fn(*args)`` for each job, the first in this thread and the rest on the pool."""
+    if not jobs:
+        return
+    futures = [pool().submit(fn, *args) for fn, args in jobs[1:]]
+    fn, args = jobs[0]
+    try:
+        fn(*args)
+    finally:
+        for f in futures:
+            f.result()
