@@ -11,11 +11,24 @@ from stylize3d_core import threads as threads_module
 from stylize3d_core.errors import RenderInterrupted
 from stylize3d_core.render import rasterize_fast
 from stylize3d_core.render.rasterize import RasterSettings, rasterize_points
+from stylize3d_core.geometry.camera import intrinsics_from_fov
 from stylize3d_core.render.rasterize_reference import rasterize_points_reference
 
-from .test_rasterize import random_scene
-
 pytestmark = pytest.mark.skipif(not rasterize_fast.available(), reason="Numba is not installed")
+
+
+def random_scene(H, W, N, C, seed, dtype=torch.float32):
+    """Two depth layers a little apart, points off the image, coincident, behind, at the camera, NaN, inf."""
+    g = torch.Generator().manual_seed(seed)
+    K = intrinsics_from_fov(50.0, H, W, dtype=dtype)
+    z = torch.where(torch.rand(N, generator=g) < 0.6, 1.0 + 0.01 * torch.rand(N, generator=g),
+                    1.8 + 0.05 * torch.rand(N, generator=g)).to(dtype)
+    u = (torch.rand(N, generator=g) * (W + 4) - 2).to(dtype)
+    v = (torch.rand(N, generator=g) * (H + 4) - 2).to(dtype)
+    pts = torch.stack([(u - K[0, 2]) / K[0, 0] * z, (v - K[1, 2]) / K[1, 1] * z, z], dim=1)
+    pts[:5] = pts[5:10]
+    pts[10, 2], pts[11, 2], pts[12, 0], pts[13, 1] = -1.0, 0.0, math.nan, math.inf
+    return pts, torch.randn(N, C, generator=g, dtype=dtype), K
 
 
 def _both(pts, feats, K, settings, monkeypatch, **kw):
