@@ -440,7 +440,7 @@ def _skips(out: Path, scene: SpeedScene, s, preset: SpeedPreset, cam, log: Log) 
     rebuilt_frame: List[np.ndarray] = []
 
     def rebuilt() -> None:
-        fresh = Stylized3DPhoto(scene.photo3d, scene.checkpoint, style_encoder=scene.style_encoder)
+        fresh = Stylized3DPhoto(scene.photo3d, scene.checkpoint, s.settings, style_encoder=scene.style_encoder)
         style_feature_cache(scene.style_encoder).clear()
         fresh.set_style(scene.style)
         fresh.set_strength(0.5)
