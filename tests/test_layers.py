@@ -18,6 +18,7 @@ LAYERS: Tuple[Tuple[str, ...], ...] = (
     ("options",),
     ("defaults",),
     ("resources",),
+    ("threads",),
     ("geometry",),
     ("io",),
     ("depth",),

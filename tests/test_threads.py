@@ -1,0 +1,39 @@
+"""The compiled kernels' thread pool: ranges split into parts, jobs run on the pool."""
+
+import threading
+
+import torch
+
+from stylize3d_core import threads
+
+
+def test_parts_cover_the_range_in_order():
+    assert threads.parts(10, 3) == [(0, 3), (3, 6), (6, 10)]
+    assert threads.parts(2, 4) == [(0, 1), (1, 2)]  # empty parts dropped
+    assert threads.parts(0, 2) == [(0, 0)]
+    for n, k in ((1, 1), (7, 2), (1000, 7)):
+        p = threads.parts(n, k)
+        assert p[0][0] == 0 and p[-1][1] == n and all(a[1] == b[0] for a, b in zip(p, p[1:]))
+
+
+def test_run_parts_runs_every_job_and_waits():
+    seen, names = [], set()
+
+    def job(i):
+        seen.append(i)
+        names.add(threading.current_thread().name)
+
+    threads.run_parts([(job, (i,)) for i in range(5)])
+    assert sorted(seen) == list(range(5))
+    assert threading.current_thread().name in names  # the first job in the caller's thread
+    threads.run_parts([])
+
+
+def test_threads_follow_torch():
+    before = torch.get_num_threads()
+    try:
+        torch.set_num_threads(1)
+        assert threads.threads() == 1
+    finally:
+        torch.set_num_threads(before)
+    assert 1 <= threads.threads() <= threads.THREADS
