@@ -317,10 +317,11 @@ def choose(rows: Sequence[dict]) -> List[Choice]:
     """The fastest row within each use's error target: previews any knob at >= 30 dB; final frames and the
     export default a knob that applies to final frames (every knob but the render scale) at >= 40 dB.
     Rows within :data:`TIE` of the fastest count as equally fast and the one with the higher PSNR is
-    chosen. bfloat16 and thread counts are not settings a user picks here, so they are left out of the
-    choice (their rows still show on the plot)."""
+    chosen. The thread count and the style CNN's bfloat16 are not settings a user picks here, so they are
+    left out of the choice (their rows still show on the plot); the decoder's bfloat16 is
+    (``StylizeSettings.bfloat16``)."""
     picks = []
-    settable = [r for r in rows if r["knob"] not in ("bfloat16", "threads")]
+    settable = [r for r in rows if r["knob"] != "threads" and "style CNN" not in r["variant"]]
     for use, target, final in (("viewer preview", PREVIEW_PSNR_DB, False), ("viewer final frame", FINAL_PSNR_DB, True),
                                ("export default", FINAL_PSNR_DB, True)):
         ok = [r for r in settable if _db(r["psnr_db"]) >= target and (r["knob"] != "resolution" or not final)]
@@ -352,8 +353,8 @@ def write_choices(out: Path, rows: Sequence[dict], frame: Tuple[int, int]) -> Li
          "target_db": c.target_db} for c in picks], notes=[
         f"the fastest row of speed.md at or above the target PSNR (frames {W}x{H}), times within {TIE:g}x of the "
         "fastest counting as a tie won by the higher PSNR; final frames and the export default from every knob but "
-        "the render scale (a point budget: StylizeSettings.final_points_per_pixel); bfloat16 and thread counts are "
-        "not offered as settings"])
+        "the render scale (a point budget: StylizeSettings.final_points_per_pixel); thread counts and the style "
+        "CNN's bfloat16 are not offered as settings (the decoder's is: StylizeSettings.bfloat16)"])
     return picks
 
 

@@ -33,7 +33,8 @@ def test_bench_speed_quick(tmp_path):
     for use, target in (("viewer preview", 30), ("export default", 40)):
         chosen = by_name[picks[use]["variant"]]
         assert chosen["psnr_db"] == "inf" or chosen["psnr_db"] >= target
-    assert by_name[picks["export default"]["variant"]]["knob"] not in ("resolution", "threads", "bfloat16")
+    export = by_name[picks["export default"]["variant"]]
+    assert export["knob"] not in ("resolution", "threads") and "style CNN" not in export["variant"]
 
 
 def test_bench_skips_quick(tmp_path):
@@ -71,3 +72,19 @@ def test_bench_targets_quick(tmp_path):
         assert value > 0
         bound = float(r["target"].split()[1])
         assert r["met"] == (value >= bound if r["target"].startswith(">=") else value <= bound)
+
+
+def test_choose_takes_the_bfloat16_decoder_but_not_threads_or_the_style_cnn():
+    from stylize3d_core.bench.speed import choose
+
+    def row(variant, knob, ms, db):
+        return {"variant": variant, "knob": knob, "ms_per_frame": ms, "psnr_db": db}
+
+    rows = [row("reference (float32, all points)", "reference", 230.0, float("inf")),
+            row("bfloat16 decoder", "bfloat16", 160.0, 61.0),
+            row("bfloat16 style CNN", "bfloat16", 100.0, 48.0),
+            row("1 thread", "threads", 50.0, 120.0),
+            row("render at 0.5x, upscaled", "resolution", 120.0, 31.0)]
+    picks = {c.use: c.variant for c in choose(rows)}
+    assert picks == {"viewer preview": "render at 0.5x, upscaled", "viewer final frame": "bfloat16 decoder",
+                     "export default": "bfloat16 decoder"}
