@@ -19,6 +19,11 @@ The machine's own limits, with the same torch threads: the throughput of a large
 CPU) and the bandwidth of a large tensor copy (bytes read + written). Each stage's floor is
 ``max(FLOPs / conv throughput, bytes / bandwidth)``; the table gives the measured time,
 the fraction of each limit reached and the measured time over the floor.
+
+Where the CPU computes bfloat16 natively (``models.decoder.native_bfloat16``: AVX-512 BF16 or
+AMX), three rows more: the same large conv in bfloat16 (its own compute limit), the decoder
+in bfloat16 (``StylizeSettings.bfloat16``, the default there; its bytes counted at 2 per value)
+and the full frame with it, both against the bfloat16 limit.
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ from typing import Callable, List, Optional, Sequence, Tuple
 import torch
 
 from ..eval.timing import time_runs
+from ..models.decoder import native_bfloat16
 from .report import write_table
 
 Log = Callable[[str], None]
@@ -122,17 +128,19 @@ def interleaved_medians(fns: Sequence[Callable[[], object]], repeats: int) -> Li
     return [statistics.median(t) for t in times]
 
 
-def conv_limit(channels: int, size: int) -> Tuple[Callable[[], object], float, float]:
-    """A 3x3 ``channels`` -> ``channels`` conv on a (1, C, size, size) channels-last image: (call, FLOPs, bytes)."""
-    conv = torch.nn.Conv2d(channels, channels, 3, padding=1).eval().to(memory_format=torch.channels_last)
-    x = torch.rand(1, channels, size, size).contiguous(memory_format=torch.channels_last)
+def conv_limit(channels: int, size: int, dtype: torch.dtype = torch.float32) -> Tuple[Callable[[], object], float, float]:
+    """A 3x3 ``channels`` -> ``channels`` conv on a (1, C, size, size) channels-last image in ``dtype``:
+    (call, FLOPs, bytes)."""
+    conv = torch.nn.Conv2d(channels, channels, 3, padding=1).eval().to(memory_format=torch.channels_last, dtype=dtype)
+    x = torch.rand(1, channels, size, size).contiguous(memory_format=torch.channels_last).to(dtype)
     with torch.inference_mode():
         out = conv(x)
 
     def call() -> None:
         with torch.inference_mode():
             conv(x)
-    return call, conv_flops(x, out, conv), 4.0 * (x.numel() + out.numel() + conv.weight.numel())
+    item = x.element_size()
+    return call, conv_flops(x, out, conv), float(item) * (x.numel() + out.numel() + conv.weight.numel())
 
 
 def copy_limit(mib: int) -> Tuple[Callable[[], object], float]:
@@ -183,20 +191,27 @@ def run_floor(out: Path, quick: bool = False, show_progress: bool = False, log: 
         with torch.inference_mode():
             raster(xyz, feats, cam)
 
-    def decode() -> None:
-        with torch.inference_mode():
-            decoder(image, mask)
+    def decode(bfloat16: bool = False) -> Callable[[], None]:
+        def call() -> None:
+            with torch.inference_mode():
+                decoder(image, mask, bfloat16=bfloat16)
+        return call
 
     conv_call, conv_flops_, conv_bytes = conv_limit(p.conv_channels, p.conv_size)
+    bf_call, bf_flops, bf_bytes = conv_limit(p.conv_channels, p.conv_size, torch.bfloat16)
     copy_call, copy_bytes = copy_limit(p.copy_mib)
-    t_conv, t_copy, t_raster, t_decoder = interleaved_medians([conv_call, copy_call, rasterize, decode], p.repeats)
-    peak_gflops, bandwidth = conv_flops_ / t_conv / 1e9, copy_bytes / t_copy / 1e9
+    fns = [conv_call, copy_call, rasterize, decode()]
+    bf16 = native_bfloat16()  # where it is emulated, bfloat16 is slower: those rows are left out
+    t_conv, t_copy, t_raster, t_decoder, *t_bf = interleaved_medians(
+        fns + ([bf_call, decode(True)] if bf16 else []), p.repeats)
+    peak_gflops_f32, bandwidth = conv_flops_ / t_conv / 1e9, copy_bytes / t_copy / 1e9
     next(steps, None)
     n_kept = kept_points(xyz, cam, H, W, settings.near_clip)
     r_flops, r_bytes = raster_work(n_kept, C, H, W)
     d_flops, d_bytes = sum(c.flops for c in convs), sum(c.bytes for c in convs)
 
-    def row(stage: str, flops: float, moved: float, seconds: float) -> dict:
+    def row(stage: str, flops: float, moved: float, seconds: float, peak: Optional[float] = None) -> dict:
+        peak_gflops = peak or peak_gflops_f32
         floor_s = max(flops / (peak_gflops * 1e9), moved / (bandwidth * 1e9))
         return {"stage": stage, "gflop": flops / 1e9, "mb_moved": moved / 1e6, "ms": 1000 * seconds,
                 "gflop_per_s": flops / seconds / 1e9, "pct_conv_peak": 100 * flops / seconds / 1e9 / peak_gflops,
@@ -214,13 +229,24 @@ def run_floor(out: Path, quick: bool = False, show_progress: bool = False, log: 
         row(f"full frame (rasterizer + decoder), {W}x{H}", d_flops + r_flops, d_bytes + r_bytes,
             t_decoder + t_raster),
     ]
+    if bf16:  # the bfloat16 rows against the bfloat16 conv's throughput (half the bytes per value)
+        peak_bf = bf_flops / t_bf[0] / 1e9
+        rows += [row(f"large conv 3x3 {p.conv_channels}->{p.conv_channels} at {p.conv_size}x{p.conv_size}, "
+                     "bfloat16 (compute limit)", bf_flops, bf_bytes, t_bf[0], peak_bf),
+                 row(f"decoder in bfloat16 (StylizeSettings.bfloat16), {W}x{H} frame", d_flops, d_bytes / 2, t_bf[1],
+                     peak_bf),
+                 row(f"full frame, decoder in bfloat16, {W}x{H}", d_flops + r_flops, d_bytes / 2 + r_bytes,
+                     t_bf[1] + t_raster, peak_bf)]
     out = Path(out)
     write_table(out, "floor", "The floor: work of a stylized frame against this CPU's limits", rows, notes=[
         f"photo {p3d.size[1]}x{p3d.size[0]} ({xyz.shape[0]:,} points), frame {W}x{H}, {C} rasterized channels; "
         f"torch threads {torch.get_num_threads()}; median of {p.repeats} round(s) after a warm-up round, each "
         "round timing the conv, the copy, the rasterizer and the decoder once (interleaved)"
         + (" (--quick preset)" if quick else ""),
-        f"limits measured here: {peak_gflops:.1f} GFLOP/s (large conv), {bandwidth:.1f} GB/s (copy, read + write)",
+        f"limits measured here: {peak_gflops_f32:.1f} GFLOP/s (large conv)"
+        + (f", {bf_flops / t_bf[0] / 1e9:.0f} GFLOP/s in bfloat16 (this CPU computes it natively; the bfloat16 "
+           "rows are against that)" if bf16 else ", bfloat16 not native here (no bfloat16 rows)")
+        + f", {bandwidth:.1f} GB/s (copy, read + write)",
         "decoder: the convolutions' FLOPs and bytes counted by forward hooks (element-wise layers not counted); "
         "rasterizer: a lower bound (4 taps per kept point; see stylize3d_core/bench/floor.py)",
         "floor_ms = max(GFLOP / conv limit, MB / bandwidth); x_floor = ms / floor_ms; bound: which limit sets "
@@ -230,7 +256,7 @@ def run_floor(out: Path, quick: bool = False, show_progress: bool = False, log: 
         {"conv": c.name, "shape": c.shape, "gflop": c.flops / 1e9, "mb_moved": c.bytes / 1e6,
          "share_of_flops": c.flops / total if total else 0.0} for c in convs], notes=[
         f"frame {W}x{H} (padded to a multiple of {2 ** decoder.config.levels}); decoder {decoder.config}"])
-    log(f"floor: conv {peak_gflops:.1f} GFLOP/s, copy {bandwidth:.1f} GB/s; decoder {rows[2]['x_floor']:.1f}x its "
+    log(f"floor: conv {peak_gflops_f32:.1f} GFLOP/s, copy {bandwidth:.1f} GB/s; decoder {rows[2]['x_floor']:.1f}x its "
         f"floor, rasterizer {rows[3]['x_floor']:.1f}x")
     return rows
 

@@ -56,11 +56,17 @@ def test_bench_floor_quick(tmp_path):
     data = json.loads((tmp_path / "floor.json").read_text())
     rows = data["rows"]
     # the limits are their own 100 %; each floor is at most the measured time of the limit that sets it
-    assert len(rows) == 5
+    from stylize3d_core.models.decoder import native_bfloat16
+
+    assert len(rows) == (8 if native_bfloat16() else 5)  # + the bfloat16 conv, decoder and frame where native
     assert rows[0]["pct_conv_peak"] == pytest.approx(100) and rows[1]["pct_bandwidth"] == pytest.approx(100)
     assert rows[0]["x_floor"] <= 1 + 1e-9 and rows[1]["x_floor"] == pytest.approx(1.0)
     assert all(r["ms"] > 0 and r["floor_ms"] > 0 for r in rows)
     dec, ras, full = rows[2], rows[3], rows[4]
     assert full["gflop"] == pytest.approx(dec["gflop"] + ras["gflop"])
+    if len(rows) == 8:
+        conv_bf, dec_bf, full_bf = rows[5], rows[6], rows[7]
+        assert conv_bf["pct_conv_peak"] == pytest.approx(100) and conv_bf["mb_moved"] == pytest.approx(rows[0]["mb_moved"] / 2)
+        assert dec_bf["gflop"] == pytest.approx(dec["gflop"]) and full_bf["gflop"] == pytest.approx(full["gflop"])
     per_conv = json.loads((tmp_path / "floor_decoder.json").read_text())["rows"]
     assert sum(r["gflop"] for r in per_conv) == pytest.approx(dec["gflop"])
