@@ -57,6 +57,7 @@ it measures the checkout it is in).
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import statistics
 import sys
@@ -474,6 +475,8 @@ def window(model: str, megapixels: float, tmp: str, max_size: int, repeats: int,
           f"{1000 * med(stats['preview_latency']):.0f} ms; {len(stats['drag_moves'])} mouse moves received "
           f"of {sum(int(drag_s * 60) for _ in drags)} sent")
     log = [dict(zip(FRAME_LOG, row)) for row in stats.get("frame_log", [])]
+    if os.environ.get("STYLIZE3D_BENCH_FRAME_LOG"):  # every frame shown, for a closer look
+        Path(os.environ["STYLIZE3D_BENCH_FRAME_LOG"]).write_text(json.dumps(log))
     prev = [r for r in log if r["kind"] == 0]
     if prev:
         ms = lambda key: 1000 * float(np.median([r[key] for r in prev]))  # noqa: E731
