@@ -6,7 +6,7 @@ layout, full-size decoding. Each variant changes one knob (point budget, render 
 split-resolution decoding (``StylizeSettings.decode_scale``: the U-Net at 1/2 or 1/4 per side, the
 detail colours at full size), supersampling, bfloat16 decoding (``StylizeSettings.bfloat16``; the reference is float32) / a bfloat16
 autocast of the style CNN, the decoder's
-memory layout, threads) and is compared with the reference on the same
+memory layout, the rasterizer's tensor path instead of its compiled one, threads) and is compared with the reference on the same
 cameras: PSNR and the EfficientNet perceptual distance
 (``eval.consistency.masked_feature_distance`` with a full mask: unit-normalised
 EfficientNet-Lite0 features, stages 1..3; 0 = identical).
@@ -42,6 +42,7 @@ import torch
 
 from ..eval.timing import median_time
 from ..models.decoder import native_bfloat16
+from ..render import rasterize_fast
 from .report import pareto_front, scatter_plot, write_table
 
 Log = Callable[[str], None]
@@ -85,6 +86,7 @@ class Variant:
     slow: bool = False  # timed once without a warm-up (bfloat16 emulated in software is ~10x slower)
     decode_scale: int = 1  # split-resolution decoding: the U-Net at 1/decode_scale per side (final and preview)
     final_points_per_pixel: Optional[float] = None  # StylizeSettings.final_points_per_pixel of full frames
+    tensor_rasterizer: bool = False  # the rasterizer's tensor path instead of its compiled one (rasterize_fast)
 
     @property
     def final(self) -> bool:
@@ -111,6 +113,7 @@ def variants(quick: bool) -> List[Variant]:
         out += [Variant("bfloat16 decoder", "bfloat16", bf16_decoder=True, slow=not native_bfloat16()),
                 Variant("bfloat16 style CNN", "bfloat16", bf16_style=True)]
     out += [Variant("channels-first (NCHW) decoder", "channels-last", channels_first=True)]
+    out += [Variant("rasterizer's tensor path (not compiled)", "rasterizer", tensor_rasterizer=True)]
     out += [Variant("1 thread", "threads", threads=1)]
     return out
 
@@ -238,9 +241,12 @@ class VariantRun:
         if v.channels_first:
             self.s.model.decoder.config = replace(self._config, channels_last=False)
             self.s.model.decoder.to(memory_format=torch.contiguous_format)
+        if v.tensor_rasterizer:
+            rasterize_fast.ENABLED = False
         return self
 
     def __exit__(self, *exc) -> None:
+        rasterize_fast.ENABLED = True
         decoder, config = self.s.model.decoder, self._config
         torch.set_num_threads(self._threads)
         if self.v.channels_first:
@@ -317,11 +323,11 @@ def choose(rows: Sequence[dict]) -> List[Choice]:
     """The fastest row within each use's error target: previews any knob at >= 30 dB; final frames and the
     export default a knob that applies to final frames (every knob but the render scale) at >= 40 dB.
     Rows within :data:`TIE` of the fastest count as equally fast and the one with the higher PSNR is
-    chosen. The thread count and the style CNN's bfloat16 are not settings a user picks here, so they are
-    left out of the choice (their rows still show on the plot); the decoder's bfloat16 is
-    (``StylizeSettings.bfloat16``)."""
+    chosen. The thread count, the rasterizer's path and the style CNN's bfloat16 are not settings a user
+    picks here, so they are left out of the choice (their rows still show on the plot); the decoder's
+    bfloat16 is (``StylizeSettings.bfloat16``)."""
     picks = []
-    settable = [r for r in rows if r["knob"] != "threads" and "style CNN" not in r["variant"]]
+    settable = [r for r in rows if r["knob"] not in ("threads", "rasterizer") and "style CNN" not in r["variant"]]
     for use, target, final in (("viewer preview", PREVIEW_PSNR_DB, False), ("viewer final frame", FINAL_PSNR_DB, True),
                                ("export default", FINAL_PSNR_DB, True)):
         ok = [r for r in settable if _db(r["psnr_db"]) >= target and (r["knob"] != "resolution" or not final)]

@@ -35,8 +35,20 @@ def taps(pc, i, fx, fy, cx, cy, H, W, near):
     return int(x0f), int(y0f), z, wx0, wx1, wy0, wy1
 
 
+ZBUFFERS, COUNT, FILL = 0, 1, 2
+"""The passes of :func:`splat_pass`."""
+
+
 @jit
-def zbuffers(pc, lo, hi, fx, fy, cx, cy, H, W, near, strong, zbuf, zfront):
+def splat_pass(pc, lo, hi, fx, fy, cx, cy, H, W, near, mode, strong, tol, zbuf, zfront, front, counts, pos,
+               index, weight):
+    """One pass over points lo..hi-1 and their bilinear taps (in the image, weight > 0).
+
+    ``ZBUFFERS``: the least depth per pixel of every tap (``zbuf``) and of the taps of weight >= ``strong``
+    (``zfront``). ``COUNT``: per pixel the taps kept by the front test against ``front`` (``counts``).
+    ``FILL``: each kept tap's point and weight written at ``pos[pixel]`` of ``index`` / ``weight`` (then
+    ``pos`` advanced). Arrays a pass does not use may be any of the right dtype.
+    """
     for i in range(lo, hi):
         x0, y0, z, wx0, wx1, wy0, wy1 = taps(pc, i, fx, fy, cx, cy, H, W, near)
         if x0 == CULLED:
@@ -52,53 +64,18 @@ def zbuffers(pc, lo, hi, fx, fy, cx, cy, H, W, near, strong, zbuf, zfront):
                 if xx < 0 or xx >= W or not w > 0:
                     continue
                 q = yy * W + xx
-                if z < zbuf[q]:
-                    zbuf[q] = z
-                if w >= strong and z < zfront[q]:
-                    zfront[q] = z
-
-
-@jit
-def count(pc, lo, hi, fx, fy, cx, cy, H, W, near, tol, front, counts):
-    for i in range(lo, hi):
-        x0, y0, z, wx0, wx1, wy0, wy1 = taps(pc, i, fx, fy, cx, cy, H, W, near)
-        if x0 == CULLED:
-            continue
-        for dy in range(2):
-            yy = y0 + dy
-            wy = wy0 if dy == 0 else wy1
-            if yy < 0 or yy >= H:
-                continue
-            for dx in range(2):
-                xx = x0 + dx
-                w = wy * (wx0 if dx == 0 else wx1)
-                if xx < 0 or xx >= W or not w > 0:
+                if mode == ZBUFFERS:
+                    if z < zbuf[q]:
+                        zbuf[q] = z
+                    if w >= strong and z < zfront[q]:
+                        zfront[q] = z
                     continue
-                q = yy * W + xx
                 f = front[q]
-                if z <= f * tol and z * tol >= f:
+                if not (z <= f * tol and z * tol >= f):
+                    continue
+                if mode == COUNT:
                     counts[q] += 1
-
-
-@jit
-def fill(pc, lo, hi, fx, fy, cx, cy, H, W, near, tol, front, pos, index, weight):
-    for i in range(lo, hi):
-        x0, y0, z, wx0, wx1, wy0, wy1 = taps(pc, i, fx, fy, cx, cy, H, W, near)
-        if x0 == CULLED:
-            continue
-        for dy in range(2):
-            yy = y0 + dy
-            wy = wy0 if dy == 0 else wy1
-            if yy < 0 or yy >= H:
-                continue
-            for dx in range(2):
-                xx = x0 + dx
-                w = wy * (wx0 if dx == 0 else wx1)
-                if xx < 0 or xx >= W or not w > 0:
-                    continue
-                q = yy * W + xx
-                f = front[q]
-                if z <= f * tol and z * tol >= f:
+                else:
                     k = pos[q]
                     index[k] = i
                     weight[k] = w

@@ -39,6 +39,7 @@ import torch.nn.functional as F
 
 from .. import threads as _threads
 
+
 @functools.lru_cache(maxsize=None)
 def _kernels():
     """The compiled kernels (None where Numba is missing or fails to import)."""
@@ -46,10 +47,11 @@ def _kernels():
         from . import _raster_kernels as k
     except Exception:  # noqa: BLE001 (any failure to import means: no compiled path)
         return None
-    return k.zbuffers, k.count, k.fill, k.normalise
+    return k
 
 
 _WARM: Optional[threading.Thread] = None
+_WARM_LOCK = threading.Lock()
 
 
 def warm_up_async() -> None:
@@ -76,8 +78,6 @@ def _warm_up() -> None:
         return
 
 
-_WARM_LOCK = threading.Lock()
-
 
 def available() -> bool:
     """Whether the compiled path can run (Numba imports)."""
@@ -95,15 +95,16 @@ def applies(points_cam: torch.Tensor, features: torch.Tensor, settings, point_si
 
 ENABLED = True
 """False: :func:`~stylize3d_core.render.rasterize.rasterize_points` always takes the tensor path
-(benchmarks compare the two)."""
+(``bench speed`` compares the two)."""
+
 
 def rasterize_fast(points_cam: torch.Tensor, features: torch.Tensor, K: torch.Tensor, settings,
                    should_stop: Optional[Callable[[], bool]] = None, chunk_points: Optional[int] = None):
-    """(image (H, W, C), weight (H*W,), depth (H*W,), hole (H*W,)) as the tensor path computes them
+    """(features (H*W, C), weight (H*W,), depth (H*W,), hole (H*W,)) as the tensor path computes them
     (``applies`` must hold; inputs checked by the caller)."""
     from ..errors import RenderInterrupted
 
-    zbuffers, count, fill, normalise = _kernels()
+    k = _kernels()
     H, W = settings.height, settings.width
     n_pix = H * W
     N, C = features.shape
@@ -118,28 +119,31 @@ def rasterize_fast(points_cam: torch.Tensor, features: torch.Tensor, K: torch.Te
         threads = min(threads, int(chunk_points))  # a round holds about chunk_points points in all
     parts = _threads.parts(N, threads)
 
-    def run(kernel, make_args):
-        """``kernel`` over every part's points: with ``should_stop``, in rounds of about ``chunk_points``
-        points (shared by the parts), the check before each round; else in one round."""
+    f32 = np.zeros(1, np.float32)  # a pass's unused arrays (typed, never touched)
+    i64 = np.zeros(1, np.int64)
+
+    def run(mode, arrays):
+        """One pass of ``k.splat_pass`` over every part's points (``arrays(t)``: part t's zbuf, zfront, front,
+        counts, pos, index, weight): with ``should_stop``, in rounds of about ``chunk_points`` points (shared
+        by the parts), the check before each round; else in one round."""
         longest = max(b - a for a, b in parts)
         step = max(1, longest) if should_stop is None else max(1, -(-int(chunk_points or N or 1) // len(parts)))
-        rounds = max(1, -(-longest // step))
-        for k in range(rounds):
+        for r in range(max(1, -(-longest // step))):
             if should_stop is not None and should_stop():
                 raise RenderInterrupted("render stopped while rasterizing")
-            jobs = [(t, a + k * step, min(b, a + (k + 1) * step)) for t, (a, b) in enumerate(parts)]
-            jobs = [j for j in jobs if j[2] > j[1]]
-            _threads.run_parts([(kernel, (pc, a, b) + tuple(make_args(t))) for t, a, b in jobs])
+            jobs = [(t, a + r * step, min(b, a + (r + 1) * step)) for t, (a, b) in enumerate(parts)]
+            _threads.run_parts([(k.splat_pass, (pc, a, b, fx, fy, cx, cy, H, W, near, mode, strong, tol) +
+                                 tuple(arrays(t))) for t, a, b in jobs if b > a])
 
     inf = np.float32(np.inf)
     zbuf = [np.full(n_pix, inf, np.float32) for _ in parts]
     zfront = [np.full(n_pix, inf, np.float32) for _ in parts]
-    run(zbuffers, lambda t: (fx, fy, cx, cy, H, W, near, strong, zbuf[t], zfront[t]))
+    run(k.ZBUFFERS, lambda t: (zbuf[t], zfront[t], f32, i64, i64, i64, f32))
     zb, zf = functools.reduce(np.minimum, zbuf), functools.reduce(np.minimum, zfront)
     front = np.where(zf < inf, zf, zb)  # (HW,) each pixel's front depth
 
     counts = [np.zeros(n_pix, np.int64) for _ in parts]
-    run(count, lambda t: (fx, fy, cx, cy, H, W, near, tol, front, counts[t]))
+    run(k.COUNT, lambda t: (f32, f32, front, counts[t], i64, i64, f32))
     total = functools.reduce(np.add, counts)
     offsets = np.zeros(n_pix + 1, np.int64)
     np.cumsum(total, out=offsets[1:])
@@ -150,12 +154,12 @@ def rasterize_fast(points_cam: torch.Tensor, features: torch.Tensor, K: torch.Te
     for c in counts:  # part t writes after the taps of parts before it: each bag in point order
         pos.append(start.copy())
         start += c
-    run(fill, lambda t: (fx, fy, cx, cy, H, W, near, tol, front, pos[t], index, weight))
+    run(k.FILL, lambda t: (f32, f32, front, i64, pos[t], index, weight))
 
     if should_stop is not None and should_stop():
         raise RenderInterrupted("render stopped while rasterizing")
     wsum = np.empty(n_pix, np.float32)
-    normalise(offsets, weight, strong, wsum)
+    k.normalise(offsets, weight, strong, wsum)
     table = features.detach()
     table = table if table.is_contiguous() else table.contiguous()
     with torch.no_grad():
