@@ -43,8 +43,8 @@ from .errors import InputError, RenderInterrupted
 from .geometry.camera import Cameras
 from .models.adaattn import blend
 from .models.checkpoint import Checkpoint, load_checkpoint
-from .models.decoder import native_bfloat16
 from .models.colour_transfer import ColourTransfer, LabStats, lab_stats, mix_stats
+from .models.decoder import native_bfloat16
 from .models.palette import Palette, apply_palette, fit_palette, palette_target
 from .models.style_features import StyleEncoder, StyleFeatures
 from .models.scene_geometry import SceneGeometry, prepare_geometry
@@ -81,7 +81,7 @@ class StylizeSettings:
         bfloat16: None (default): the decoder runs under a bfloat16 autocast where this CPU computes
             bfloat16 natively (:func:`~stylize3d_core.models.decoder.native_bfloat16`: AVX-512 BF16 or
             AMX), float32 elsewhere; True or False forces it. The rasterizer, the encoder, the stylizer and
-            the palette map stay float32; bfloat16 frames are ~55 dB PSNR from float32 ones (``bench speed``).
+            the palette map stay float32; bfloat16 frames are 55-61 dB PSNR from float32 ones (``bench speed``).
     """
 
     strength: float = DEFAULT_STRENGTH

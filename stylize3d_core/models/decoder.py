@@ -69,10 +69,10 @@ average) and takes the mean mask as the coverage channel, then decodes at
 <= 0.5 s, 256^2 preview <= 0.1 s on 2 cores; ``benchmarks/bench_decoder.py``).
 Run it under ``torch.inference_mode()``; with ``channels_last`` (default) the
 weights and activations use NHWC, which oneDNN convolves fastest on CPU.
-``forward(..., bfloat16=True)`` (inference) runs it under a bfloat16 autocast and returns
-float32: on a CPU with native bfloat16 (AVX-512 BF16 / AMX, :func:`native_bfloat16`)
-oneDNN's bfloat16 convolutions are 3-6x faster than float32 ones, and the frames differ
-from float32's by ~55 dB PSNR (``bench speed``); without it they are emulated and slower.
+``forward(..., bfloat16=True)`` (inference) runs the U-Net's convolutions under a bfloat16
+autocast (the heads in float32) and returns float32: on a CPU with native bfloat16 (AVX-512
+BF16 / AMX, :func:`native_bfloat16`) a 512x342 frame decodes ~2.4x faster (``bench floor``),
+55-61 dB PSNR from float32 (``bench speed``); without it bfloat16 is emulated and slower.
 
 **Stopping** (``forward(..., should_stop=)``, the viewer's full frames): a
 768x512 frame takes ~1-2 s on one CPU thread, its largest single layer ~0.25 s.
@@ -112,6 +112,7 @@ def native_bfloat16() -> bool:
                     (cpu._is_avx512_bf16_supported() or cpu._is_amx_tile_supported()))
     except (AttributeError, RuntimeError):  # an older or newer torch without these probes: assume not
         return False
+
 
 STRIP_MACS = 120_000_000
 """Multiply-adds per strip of :func:`conv_in_strips` (~10-20 ms on one CPU thread)."""
