@@ -235,7 +235,7 @@ class Stylized3DPhoto:
         self._dense: Optional[torch.Tensor] = None  # (N, Cr) in self._order
         self._palette_target: Optional[LabStats] = None  # what the palette map aims at (set with the dense features)
         self._palette: Optional[Palette] = None  # the map the last render used (its size's, from self._palettes)
-        self._palettes: Dict[Tuple[int, int], Palette] = {}  # per render size (see _palette_for)
+        self._palettes: Dict[Tuple[int, int, bool], Palette] = {}  # per render size and kind (see _palette_for)
         self._strength = settings.strength
         self.timings.update({"geometry": t1 - t0, "encode": t2 - t1})
 
@@ -337,16 +337,23 @@ class Stylized3DPhoto:
 
     PALETTE_FIT_MAX = 1024
     """Longest side (px) of the own-view render a palette map is fitted on (larger frames: that size)."""
-    PALETTE_SIZES = 16
-    """Palette maps kept per style and strength, one per render size (the least recently fitted goes)."""
+    PALETTE_SIZES = 64
+    """Palette maps kept per style and strength, one per render size and kind (the least recently fitted
+    goes): the viewer's adaptive previews go through many sizes."""
 
-    def _palette_for(self, height: int, width: int, should_stop: Optional[Callable[[], bool]]) -> Palette:
+    def _palette_for(self, height: int, width: int, should_stop: Optional[Callable[[], bool]],
+                     preview: bool = False) -> Palette:
         """The palette map for frames of (height, width): fitted once per size on the photo's own view
         rendered at that size. The model's colours depend on the size it renders at (where points are
         sparser than pixels its own fill shows more: version 6 of the lite model is up to ~12 levels bluer
         at 48 px than at 768 px), so one map fitted at one size left previews and full frames of other
-        sizes off the target, and a visible colour jump when a full frame replaced a preview."""
-        key = (height, width)
+        sizes off the target, and a visible colour jump when a full frame replaced a preview.
+
+        Full frames fit on every point; previews on the preview's own point subset at their size, as
+        they render (``preview`` True): the viewer's adaptive preview size changes from frame to frame,
+        and an every-point fit (~0.1-0.15 s, mostly rasterizing every point) in the middle of a drag
+        made the size adaptation shrink the previews; the subset's fit costs about a preview."""
+        key = (height, width, bool(preview))
         pal = self._palettes.get(key)
         if pal is not None:
             return pal
@@ -354,9 +361,10 @@ class Stylized3DPhoto:
         scale = min(1.0, self.PALETTE_FIT_MAX / max(height, width))
         fh, fw = max(8, round(height * scale)), max(8, round(width * scale))
         own = Cameras.identity(self.photo.fov_y_deg)
-        # every point, no supersampling: the map depends on the photo, style, strength and size only, not on
-        # the preview or final point budgets (a budget's subset changes the colours by up to ~0.3 levels)
-        rgb = self._render_model(own, fh, fw, preview=True, should_stop=should_stop, every_point=True)
+        # full frames: every point, no supersampling: the map depends on the photo, style, strength and size
+        # only, not on the final point budget (a budget's subset changes the colours by up to ~0.3 levels);
+        # previews: the preview render itself (its subset, its decode scale)
+        rgb = self._render_model(own, fh, fw, preview=True, should_stop=should_stop, every_point=not preview)
         pal = fit_palette(rgb.permute(1, 2, 0).numpy(), self._palette_target)
         if len(self._palettes) >= self.PALETTE_SIZES:
             self._palettes.pop(next(iter(self._palettes)))
@@ -383,7 +391,7 @@ class Stylized3DPhoto:
         """
         if self._dense is None:  # upsampled lazily: a style set right after construction is not done twice
             self._update_dense()
-        pal = None if self._palette_target is None else self._palette_for(height, width, should_stop)
+        pal = None if self._palette_target is None else self._palette_for(height, width, should_stop, preview)
         rgb = self._render_model(camera, height, width, preview=preview, should_stop=should_stop)
         self._palette = pal
         if pal is not None:

@@ -229,8 +229,10 @@ def test_final_points_per_pixel_keeps_a_prefix(stylized):
         np.testing.assert_array_equal(stylized.render(cam, 12, 16), full)
         stylized.settings = replace(before, final_points_per_pixel=1.0, preview_points_per_pixel=1.0)
         subset = stylized.render(cam, 12, 16)
-        # the same prefix as a preview of the same density (supersample 1), and not every point
-        np.testing.assert_array_equal(subset, stylized.render(cam, 12, 16, preview=True))
+        # the model's view is the same prefix as a preview of the same density (supersample 1); the palette
+        # maps differ (a preview's is fitted on its own subset, a full frame's on every point)
+        model_view = (lambda preview: stylized._render_model(cam, 12, 16, preview=preview, should_stop=None))
+        np.testing.assert_array_equal(model_view(False).numpy(), model_view(True).numpy())
         assert np.isfinite(subset).all() and not np.array_equal(subset, full)
     finally:
         stylized.settings = before
@@ -295,6 +297,31 @@ def test_palette_map_is_one_colour_matrix_for_every_view(stylized):
     assert on.palette is None
     with pytest.raises(InputError):
         StylizeSettings(match_palette="yes")
+
+
+def test_previews_fit_their_palette_map_on_their_own_point_subset(stylized):
+    """A preview's map is fitted on the preview render itself (its point subset), a full frame's on every
+    point: both kept per size, and a preview of the own view has the statistics its map reached."""
+    from stylize3d_core.geometry.camera import Cameras as Cams
+    from stylize3d_core.models.checkpoint import Checkpoint
+    from stylize3d_core.models.palette import _stats, _to_lab
+
+    p = stylized.photo
+    g = np.random.default_rng(8)
+    on = Stylized3DPhoto(p, Checkpoint(stylized.model, 2, {}),
+                         StylizeSettings(strength=1.0, preview_points_per_pixel=0.5))
+    on.set_style(g.random((16, 16, 3)).astype(np.float32))
+    own = Cams.identity(p.fov_y_deg)
+    prev = on.render(own, 48, 64, preview=True)
+    pal_prev = on.palette
+    on.render(own, 48, 64)
+    pal_full = on.palette
+    assert set(on._palettes) == {(48, 64, True), (48, 64, False)} and pal_prev is not pal_full
+    assert not np.array_equal(pal_prev.matrix, pal_full.matrix)  # another point set, another fit
+    got = _stats(_to_lab(prev.reshape(-1, 3)))  # the preview is the render the map was fitted on
+    assert np.abs(np.asarray(got.mean) - np.asarray(pal_prev.after.mean)).max() < 0.5
+    on.render(own, 48, 64, preview=True)
+    assert on.palette is pal_prev  # cached
 
 
 def test_palette_map_is_fitted_per_render_size(stylized):
