@@ -532,9 +532,16 @@ def rasterize_points(
     C = features.shape[1]
     N = points_cam.shape[0]
     if rasterize_fast.applies(points_cam, features, settings, point_size):  # the compiled inference path
-        out, wsum, depth, hole = rasterize_fast.rasterize_fast(points_cam, features, K, settings, should_stop,
-                                                               chunk_points)
-        return Fragments(out.view(H, W, C).permute(2, 0, 1), wsum.view(H, W), depth.view(H, W), hole.view(H, W))
+        try:
+            out, wsum, depth, hole = rasterize_fast.rasterize_fast(points_cam, features, K, settings,
+                                                                   should_stop, chunk_points)
+        except RenderInterrupted:
+            raise
+        except Exception as exc:  # noqa: BLE001 (kernels that fail to compile or run here: the tensor path)
+            rasterize_fast.disable(exc)
+        else:
+            return Fragments(out.view(H, W, C).permute(2, 0, 1), wsum.view(H, W), depth.view(H, W),
+                             hole.view(H, W))
     sp = _splat(points_cam, K, settings, point_size, should_stop, chunk_points)
     M = sp.point.shape[0]
     E = sp.pixel.shape[0]

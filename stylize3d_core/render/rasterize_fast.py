@@ -31,6 +31,7 @@ from __future__ import annotations
 import functools
 import math
 import threading
+import warnings
 from typing import Callable, Optional
 
 import numpy as np
@@ -95,7 +96,17 @@ def applies(points_cam: torch.Tensor, features: torch.Tensor, settings, point_si
 
 ENABLED = True
 """False: :func:`~stylize3d_core.render.rasterize.rasterize_points` always takes the tensor path
-(``bench speed`` compares the two)."""
+(``bench speed`` compares the two; :func:`disable` sets it after a failure)."""
+
+
+def disable(exc: BaseException) -> None:
+    """Turn the compiled path off for this process after it failed (a kernel that does not compile or run
+    on this machine): a warning names the error once, and every later call takes the tensor path."""
+    global ENABLED
+    if ENABLED:
+        ENABLED = False
+        warnings.warn(f"stylize3d: the rasterizer's compiled path failed ({type(exc).__name__}: {exc}); "
+                      "using the tensor path from now on", RuntimeWarning, stacklevel=3)
 
 
 def rasterize_fast(points_cam: torch.Tensor, features: torch.Tensor, K: torch.Tensor, settings,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 
 import pytest
 import torch
@@ -129,3 +130,25 @@ def test_the_tensor_path_keeps_what_the_compiled_one_does_not_take():
     assert not rasterize_fast.applies(pts, grad, s, None)  # training: the tensor path's gradient
     with torch.no_grad():
         assert rasterize_fast.applies(pts, grad, s, None)
+
+
+def test_a_failing_compiled_path_falls_back_to_the_tensor_path(monkeypatch):
+    pts, feats, K = random_scene(11, 13, 300, 4, seed=9)
+    settings = RasterSettings(11, 13)
+    with torch.inference_mode():
+        monkeypatch.setattr(rasterize_fast, "ENABLED", False)
+        slow = rasterize_points(pts, feats, K, settings)
+        monkeypatch.setattr(rasterize_fast, "ENABLED", True)
+
+        def broken(*args, **kwargs):
+            raise RuntimeError("no LLVM here")
+
+        monkeypatch.setattr(rasterize_fast, "rasterize_fast", broken)
+        with pytest.warns(RuntimeWarning, match="no LLVM here"):
+            frags = rasterize_points(pts, feats, K, settings)
+        assert not rasterize_fast.ENABLED and not rasterize_fast.applies(pts, feats, settings, None)
+        for a, b in zip(frags, slow):
+            assert torch.equal(a, b)  # the tensor path's result
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            rasterize_points(pts, feats, K, settings)  # no second warning: the path stays off
