@@ -235,7 +235,7 @@ class Stylized3DPhoto:
         self._dense: Optional[torch.Tensor] = None  # (N, Cr) in self._order
         self._palette_target: Optional[LabStats] = None  # what the palette map aims at (set with the dense features)
         self._palette: Optional[Palette] = None  # the map the last render used (its size's, from self._palettes)
-        self._palettes: Dict[Tuple[int, int, bool], Palette] = {}  # per render size and kind (see _palette_for)
+        self._palettes: Dict[tuple, Palette] = {}  # per render size, kind and fit settings (see _palette_for)
         self._strength = settings.strength
         self.timings.update({"geometry": t1 - t0, "encode": t2 - t1})
 
@@ -352,8 +352,12 @@ class Stylized3DPhoto:
         Full frames fit on every point; previews on the preview's own point subset at their size, as
         they render (``preview`` True): the viewer's adaptive preview size changes from frame to frame,
         and an every-point fit (~0.1-0.15 s, mostly rasterizing every point) in the middle of a drag
-        made the size adaptation shrink the previews; the subset's fit costs about a preview."""
-        key = (height, width, bool(preview))
+        made the size adaptation shrink the previews; the subset's fit costs about a preview. The key holds
+        the settings the fit's render depends on, so a change of them (the bench sweeps do it on one
+        instance) fits again."""
+        st = self.settings
+        key = (height, width, bool(preview), st.decode_bfloat16) + (
+            (st.preview_points_per_pixel, st.preview_decode_scale) if preview else ())
         pal = self._palettes.get(key)
         if pal is not None:
             return pal

@@ -316,12 +316,17 @@ def test_previews_fit_their_palette_map_on_their_own_point_subset(stylized):
     pal_prev = on.palette
     on.render(own, 48, 64)
     pal_full = on.palette
-    assert set(on._palettes) == {(48, 64, True), (48, 64, False)} and pal_prev is not pal_full
+    assert {k[:3] for k in on._palettes} == {(48, 64, True), (48, 64, False)} and pal_prev is not pal_full
     assert not np.array_equal(pal_prev.matrix, pal_full.matrix)  # another point set, another fit
     got = _stats(_to_lab(prev.reshape(-1, 3)))  # the preview is the render the map was fitted on
     assert np.abs(np.asarray(got.mean) - np.asarray(pal_prev.after.mean)).max() < 0.5
     on.render(own, 48, 64, preview=True)
     assert on.palette is pal_prev  # cached
+    from dataclasses import replace
+
+    on.settings = replace(on.settings, preview_points_per_pixel=2.0)  # another subset: fitted again
+    on.render(own, 48, 64, preview=True)
+    assert on.palette is not pal_prev and len(on._palettes) == 3
 
 
 def test_palette_map_is_fitted_per_render_size(stylized):

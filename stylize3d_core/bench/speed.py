@@ -4,9 +4,9 @@ The reference is the full-quality float32 render: every point, supersample 1,
 the preset's frame size, torch's default threads, the decoder's channels-last
 layout, full-size decoding. Each variant changes one knob (point budget, render resolution,
 split-resolution decoding (``StylizeSettings.decode_scale``: the U-Net at 1/2 or 1/4 per side, the
-detail colours at full size), supersampling, bfloat16 decoding (``StylizeSettings.bfloat16``; the reference is float32) / a bfloat16
-autocast of the style CNN, the decoder's
-memory layout, the rasterizer's tensor path instead of its compiled one, threads) and is compared with the reference on the same
+detail colours at full size), supersampling, bfloat16 decoding (``StylizeSettings.bfloat16``; the
+reference is float32) or a bfloat16 autocast of the style CNN, the decoder's memory layout, the
+rasterizer's tensor path instead of its compiled one, threads) and is compared with the reference on the same
 cameras: PSNR and the EfficientNet perceptual distance
 (``eval.consistency.masked_feature_distance`` with a full mask: unit-normalised
 EfficientNet-Lite0 features, stages 1..3; 0 = identical).
@@ -87,6 +87,12 @@ class Variant:
     decode_scale: int = 1  # split-resolution decoding: the U-Net at 1/decode_scale per side (final and preview)
     final_points_per_pixel: Optional[float] = None  # StylizeSettings.final_points_per_pixel of full frames
     tensor_rasterizer: bool = False  # the rasterizer's tensor path instead of its compiled one (rasterize_fast)
+
+    @property
+    def setting(self) -> bool:
+        """A setting a user can pick (``StylizeSettings``); the thread count, the rasterizer's path and the
+        style CNN's bfloat16 are measured beside them, not offered (:func:`choose` leaves them out)."""
+        return self.threads is None and not self.tensor_rasterizer and not self.bf16_style
 
     @property
     def final(self) -> bool:
@@ -241,12 +247,13 @@ class VariantRun:
         if v.channels_first:
             self.s.model.decoder.config = replace(self._config, channels_last=False)
             self.s.model.decoder.to(memory_format=torch.contiguous_format)
+        self._compiled = rasterize_fast.ENABLED
         if v.tensor_rasterizer:
             rasterize_fast.ENABLED = False
         return self
 
     def __exit__(self, *exc) -> None:
-        rasterize_fast.ENABLED = True
+        rasterize_fast.ENABLED = self._compiled
         decoder, config = self.s.model.decoder, self._config
         torch.set_num_threads(self._threads)
         if self.v.channels_first:
@@ -323,11 +330,10 @@ def choose(rows: Sequence[dict]) -> List[Choice]:
     """The fastest row within each use's error target: previews any knob at >= 30 dB; final frames and the
     export default a knob that applies to final frames (every knob but the render scale) at >= 40 dB.
     Rows within :data:`TIE` of the fastest count as equally fast and the one with the higher PSNR is
-    chosen. The thread count, the rasterizer's path and the style CNN's bfloat16 are not settings a user
-    picks here, so they are left out of the choice (their rows still show on the plot); the decoder's
-    bfloat16 is (``StylizeSettings.bfloat16``)."""
+    chosen. Only rows that are settings (``Variant.setting``: not the thread count, the rasterizer's path or
+    the style CNN's bfloat16) are chosen from; the others still show on the plot."""
     picks = []
-    settable = [r for r in rows if r["knob"] not in ("threads", "rasterizer") and "style CNN" not in r["variant"]]
+    settable = [r for r in rows if r["setting"]]
     for use, target, final in (("viewer preview", PREVIEW_PSNR_DB, False), ("viewer final frame", FINAL_PSNR_DB, True),
                                ("export default", FINAL_PSNR_DB, True)):
         ok = [r for r in settable if _db(r["psnr_db"]) >= target and (r["knob"] != "resolution" or not final)]
@@ -385,7 +391,7 @@ def run_speed(out: Path, quick: bool = False, show_progress: bool = False, log: 
         d = float(np.mean([dist(f, r, fr) for f, r, fr in zip(frames, reference, ref_feats)]))
         rows.append({"variant": v.name, "knob": v.knob, "ms_per_frame": 1000 * per_frame,
                      "first_frame_s": ttff, "psnr_db": p if p < 1e9 else math.inf, "perceptual": d,
-                     "finite": bool(all(np.isfinite(f).all() for f in frames)), "final": v.final,
+                     "finite": bool(all(np.isfinite(f).all() for f in frames)), "final": v.final, "setting": v.setting,
                      "timed_runs": 1 if v.slow else preset.repeats})
     ref_ms = rows[0]["ms_per_frame"]
     for r in rows:

@@ -39,6 +39,7 @@ import torch
 import torch.nn.functional as F
 
 from .. import threads as _threads
+from ..errors import RenderInterrupted
 
 
 @functools.lru_cache(maxsize=None)
@@ -113,8 +114,6 @@ def rasterize_fast(points_cam: torch.Tensor, features: torch.Tensor, K: torch.Te
                    should_stop: Optional[Callable[[], bool]] = None, chunk_points: Optional[int] = None):
     """(features (H*W, C), weight (H*W,), depth (H*W,), hole (H*W,)) as the tensor path computes them
     (``applies`` must hold; inputs checked by the caller)."""
-    from ..errors import RenderInterrupted
-
     k = _kernels()
     H, W = settings.height, settings.width
     n_pix = H * W

@@ -74,17 +74,20 @@ def test_bench_targets_quick(tmp_path):
         assert r["met"] == (value >= bound if r["target"].startswith(">=") else value <= bound)
 
 
-def test_choose_takes_the_bfloat16_decoder_but_not_threads_or_the_style_cnn():
+def test_choose_takes_the_bfloat16_decoder_but_not_threads_the_rasterizer_path_or_the_style_cnn():
     from stylize3d_core.bench.speed import choose
 
-    def row(variant, knob, ms, db):
-        return {"variant": variant, "knob": knob, "ms_per_frame": ms, "psnr_db": db}
+    from stylize3d_core.bench.speed import Variant
 
-    rows = [row("reference (float32, all points)", "reference", 230.0, float("inf")),
-            row("bfloat16 decoder", "bfloat16", 160.0, 61.0),
-            row("bfloat16 style CNN", "bfloat16", 100.0, 48.0),
-            row("1 thread", "threads", 50.0, 120.0),
-            row("render at 0.5x, upscaled", "resolution", 120.0, 31.0)]
+    def row(v, ms, db):
+        return {"variant": v.name, "knob": v.knob, "ms_per_frame": ms, "psnr_db": db, "setting": v.setting}
+
+    rows = [row(Variant("reference (float32, all points)", "reference"), 230.0, float("inf")),
+            row(Variant("bfloat16 decoder", "bfloat16", bf16_decoder=True), 160.0, 61.0),
+            row(Variant("bfloat16 style CNN", "bfloat16", bf16_style=True), 100.0, 48.0),
+            row(Variant("1 thread", "threads", threads=1), 50.0, 120.0),
+            row(Variant("rasterizer's tensor path", "rasterizer", tensor_rasterizer=True), 60.0, 90.0),
+            row(Variant("render at 0.5x, upscaled", "resolution", scale=0.5), 120.0, 31.0)]
     picks = {c.use: c.variant for c in choose(rows)}
     assert picks == {"viewer preview": "render at 0.5x, upscaled", "viewer final frame": "bfloat16 decoder",
                      "export default": "bfloat16 decoder"}

@@ -267,7 +267,21 @@ def test_bfloat16_decoding_is_for_inference_only(lite):
         lite(feats, mask, bfloat16=True)
 
 
-def test_native_bfloat16_is_a_bool():
-    from stylize3d_core.models.decoder import native_bfloat16
+def test_native_bfloat16_reads_the_cpu_probes_and_survives_their_absence(monkeypatch):
+    from stylize3d_core.models import decoder
 
-    assert native_bfloat16() in (True, False)
+    def probes(bf16, amx):
+        monkeypatch.setattr(torch.cpu, "_is_avx512_bf16_supported", lambda: bf16, raising=False)
+        monkeypatch.setattr(torch.cpu, "_is_amx_tile_supported", lambda: amx, raising=False)
+        decoder.native_bfloat16.cache_clear()
+        return decoder.native_bfloat16()
+
+    try:
+        assert probes(False, False) is False
+        assert probes(True, False) is True and probes(False, True) is True
+        monkeypatch.delattr(torch.cpu, "_is_avx512_bf16_supported")  # a torch without the probe
+        decoder.native_bfloat16.cache_clear()
+        assert decoder.native_bfloat16() is False
+    finally:
+        monkeypatch.undo()
+        decoder.native_bfloat16.cache_clear()
