@@ -1,16 +1,18 @@
-"""A small shared thread pool for compiled kernels that release the GIL (``render/rasterize_fast.py``):
-work split into contiguous parts of a range, one part per thread."""
+"""A small shared thread pool for work that releases the GIL: the compiled rasterizer's passes
+(``render/rasterize_fast.py``: contiguous parts of a range, one per thread) and the colour transfer's
+chunks (``models/colour_transfer.py``)."""
 
 from __future__ import annotations
 
+import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from typing import Callable, List, Optional, Tuple
 
 import torch
 
-THREADS = 2
-"""Threads of the pool (a call uses at most torch's thread count of them)."""
+THREADS = max(1, min(4, os.cpu_count() or 1))
+"""Threads of the pool (the rasterizer uses at most torch's thread count of them)."""
 
 _POOL: Optional[ThreadPoolExecutor] = None
 _LOCK = threading.Lock()

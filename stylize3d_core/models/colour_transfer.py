@@ -28,14 +28,13 @@ it recolours inputs, at inference and in training alike.
 
 from __future__ import annotations
 
-import os
-from concurrent.futures import ThreadPoolExecutor
 from typing import NamedTuple
 
 import cv2
 import numpy as np
 import torch
 
+from .. import threads as _threads
 from ..checks import check_range
 
 MAX_GAIN = 3.0
@@ -141,7 +140,6 @@ def gamut_map(lab: np.ndarray, steps: int = 8) -> np.ndarray:
 
 _CHUNK = 1 << 17
 """Colours mapped at once by :class:`ColourTransfer` (a chunk's temporaries stay in the cache)."""
-_THREADS = max(1, min(4, os.cpu_count() or 1))
 
 
 class ColourTransfer:
@@ -186,8 +184,7 @@ class ColourTransfer:
         if len(starts) == 1:
             part(0)
         else:  # numpy and OpenCV free the GIL on arrays this large
-            with ThreadPoolExecutor(max_workers=_THREADS) as pool:
-                list(pool.map(part, starts))
+            list(_threads.pool().map(part, starts))
         return torch.from_numpy(back).to(self.rgb.device)
 
 
