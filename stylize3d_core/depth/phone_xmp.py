@@ -44,7 +44,7 @@ import cv2
 import numpy as np
 
 from ..errors import InputError, PathLike
-from ..io.images import LoadedImage, apply_orientation
+from ..io.images import LoadedImage, apply_orientation, check_jpeg_structure, check_png_structure, encoded_image_size
 from ._util import resize_to
 from .types import DepthMap, DepthKind
 
@@ -130,16 +130,20 @@ def _xmp_packets(segments: List[Tuple[int, bytes]], name: str) -> Tuple[Optional
             parts.setdefault(guid, (total, {}))[1][offset] = body[40:]
     extended: Dict[str, bytes] = {}
     for guid, (total, chunks) in parts.items():
-        buf = bytearray(total)
+        # The chunks must tile [0, total) in order. Checked before anything of size
+        # ``total`` exists: the length is 4 bytes of the file, up to 4 GB.
         covered = 0
         for offset, chunk in sorted(chunks.items()):
+            if offset > covered:
+                raise InputError(name, f"extended XMP {guid} is incomplete (bytes {covered}-{offset} of {total} are missing)")
+            if offset < covered:
+                raise InputError(name, f"corrupt extended XMP {guid}: a chunk at {offset} overlaps the one before it")
             if offset + len(chunk) > total:
                 raise InputError(name, f"corrupt extended XMP {guid}: chunk at {offset} exceeds its length {total}")
-            buf[offset : offset + len(chunk)] = chunk
             covered += len(chunk)
         if covered != total:
             raise InputError(name, f"extended XMP {guid} is incomplete ({covered} of {total} bytes)")
-        extended[guid] = bytes(buf)
+        extended[guid] = b"".join(chunk for _, chunk in sorted(chunks.items()))
     return standard, extended
 
 
@@ -188,9 +192,27 @@ def _number(props: Dict[str, str], key: str, name: str, where: str) -> float:
     return value
 
 
+MAX_PIXELS = 50_000_000
+"""Largest embedded depth image accepted (phones store depth at or below the photo's 12-50 MP)."""
+
+
 def _decode_image(blob: bytes, name: str, what: str) -> np.ndarray:
-    """PNG/JPEG bytes -> (h, w) grey values in [0, 1] as float64."""
-    img = cv2.imdecode(np.frombuffer(blob, np.uint8), cv2.IMREAD_UNCHANGED) if blob else None
+    """PNG/JPEG bytes -> (h, w) grey values in [0, 1] as float64.
+
+    The image must be complete (a truncated JPEG would decode to grey filler) and
+    at most :data:`MAX_PIXELS`, both checked on its structure before decoding.
+    """
+    if blob.startswith(_SIGNATURES["image/png"]):
+        header = check_png_structure(blob, name)
+        w, h = header.width, header.height
+    elif blob.startswith(_SIGNATURES["image/jpeg"]):
+        check_jpeg_structure(blob, name)
+        w, h = encoded_image_size(blob) or (0, 0)
+    else:
+        raise InputError(name, f"{what} is not a readable PNG or JPEG image")
+    if w * h > MAX_PIXELS:
+        raise InputError(name, f"{what} declares {w * h:,} pixels, more than {MAX_PIXELS:,} (not a phone depth map)")
+    img = cv2.imdecode(np.frombuffer(blob, np.uint8), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise InputError(name, f"{what} is not a readable PNG or JPEG image")
     if img.ndim == 3:

@@ -22,6 +22,7 @@ from __future__ import annotations
 import io
 import math
 import os
+import re
 import struct
 import warnings
 from dataclasses import dataclass, field
@@ -199,6 +200,25 @@ def check_jpeg_structure(data: bytes, source: PathLike) -> None:
             return
         pos = seg_end
     raise InputError(source, "JPEG file is truncated (no end-of-image marker)")
+
+
+def encoded_image_size(data: bytes) -> Optional[Tuple[int, int]]:
+    """(width, height) an encoded image's header declares, read by Pillow without decoding; None if unknown.
+
+    For checking a size before a decoder (OpenCV's) allocates it: compare
+    ``width * height``. An image so large that Pillow refuses it as a
+    decompression bomb gives (pixel count from Pillow's error, 1), or (2**31, 1).
+    """
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            with Image.open(io.BytesIO(data)) as im:
+                return tuple(im.size)
+    except Image.DecompressionBombError as e:
+        found = re.search(r"\((\d+) pixels\)", str(e))
+        return (int(found.group(1)) if found else 2**31, 1)
+    except Exception:  # noqa: BLE001 -- any header Pillow cannot read: the size is unknown
+        return None
 
 
 # ---------------------------------------------------------------------------- decoding

@@ -53,6 +53,24 @@ def test_npy_header_tokenerror_is_an_input_error():
     targets.run_one("depth_file", data, known_open=False)
 
 
+def test_extended_xmp_length_is_checked_before_allocating():
+    """Found by the fuzzer (out of memory in CI): a 4-byte extended-XMP length of 4 GB was allocated first."""
+    import tracemalloc
+
+    from stylize3d_core.depth.phone_xmp import read_embedded_depth
+    from stylize3d_core.errors import InputError
+
+    data = (HERE / "crashes" / "phone_jpeg" / "extended-xmp-huge-length").read_bytes()
+    tracemalloc.start()
+    try:
+        with pytest.raises(InputError, match="incomplete"):
+            read_embedded_depth(data, "p.jpg")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 16 * 2**20
+
+
 def test_seed_inputs_reach_the_parsers_deep_paths(tmp_path):
     """The seeds are valid files, so mutations start from inputs that get past the first checks."""
     from stylize3d_core.depth.phone_xmp import read_embedded_depth

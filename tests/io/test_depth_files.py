@@ -233,3 +233,48 @@ def test_empty_npy_is_named(tmp_path, shape):
     np.save(tmp_path / "empty.npy", np.zeros(shape, np.float32))
     with pytest.raises(InputError, match="empty.npy.*depth map is empty"):
         read_depth_values(tmp_path / "empty.npy")
+
+
+def _tiff_declaring(width: int, height: int) -> bytes:
+    """A small float TIFF whose ImageWidth/ImageLength tags are rewritten to ``width`` x ``height``."""
+    import io as _io
+    import struct
+
+    from PIL import Image
+
+    buf = _io.BytesIO()
+    Image.fromarray(np.ones((6, 8), np.float32)).save(buf, format="TIFF")
+    data = bytearray(buf.getvalue())
+    assert data[:2] == b"II"
+    (ifd,) = struct.unpack_from("<I", data, 4)
+    (count,) = struct.unpack_from("<H", data, ifd)
+    for i in range(count):
+        at = ifd + 2 + 12 * i
+        tag, kind = struct.unpack_from("<HH", data, at)
+        if tag in (256, 257):  # ImageWidth, ImageLength
+            value = width if tag == 256 else height
+            struct.pack_into("<HHII", data, at, tag, 4, 1, value)  # as LONG
+    return bytes(data)
+
+
+def test_tiff_declaring_a_huge_size_is_refused_before_decoding(tmp_path):
+    import tracemalloc
+
+    path = tmp_path / "huge.tiff"
+    path.write_bytes(_tiff_declaring(40_000, 40_000))
+    tracemalloc.start()
+    try:
+        with pytest.raises(InputError, match="declares 1,600,000,000 pixels, more than 150,000,000") as err:
+            read_depth_values(path)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert str(path) in str(err.value)
+    assert peak < 16 * 2**20
+
+
+def test_tiff_with_rewritten_tags_still_reads_at_its_true_size(tmp_path):
+    path = tmp_path / "same.tiff"
+    path.write_bytes(_tiff_declaring(8, 6))
+    values, _ = read_depth_values(path)
+    assert values.shape == (6, 8) and np.all(values == 1.0)
