@@ -28,6 +28,7 @@ Thread use: an instance is not thread-safe; call it from one (worker) thread.
 from __future__ import annotations
 
 import hashlib
+import math
 import time
 import weakref
 from collections import OrderedDict
@@ -40,7 +41,7 @@ import torch
 from .checks import check_range, check_shape
 from .defaults import DEFAULT_STRENGTH
 from .errors import InputError, RenderInterrupted
-from .geometry.camera import Cameras
+from .geometry.camera import MAX_FOV_DEG, Cameras
 from .models.adaattn import blend
 from .models.checkpoint import Checkpoint, load_checkpoint
 from .models.colour_transfer import ColourTransfer, LabStats, lab_stats, mix_stats
@@ -82,6 +83,14 @@ class StylizeSettings:
             bfloat16 natively (:func:`~stylize3d_core.models.decoder.native_bfloat16`: AVX-512 BF16 or
             AMX), float32 elsewhere; True or False forces it. The rasterizer, the encoder, the stylizer and
             the palette map stay float32; bfloat16 frames are 55-61 dB PSNR from float32 ones (``bench speed``).
+        border_margin: pixels rendered beyond each side of a full frame and cut off (default 8; 0: none).
+            The U-Net's zero padding makes its outermost ~8 pixels differ from what it decodes inside a
+            frame (up to ~20 levels at the edge: a visible coloured rim); with the margin, the frame's edge
+            is decoded as its inside is, at ~6-8 % more pixels at 512 px. Rounded up to a multiple of the
+            decoder's stride (at split-resolution decoding, times the decode scale), so the frame keeps the
+            decoder's grid phase.
+        preview_border_margin: the same for previews (default 4: the rim is as wide at any size, so it covers
+            more of a small preview; 4 pixels take the edge's error from ~20 to ~7 levels at +2-10 % time).
     """
 
     strength: float = DEFAULT_STRENGTH
@@ -93,8 +102,14 @@ class StylizeSettings:
     preview_decode_scale: int = 1
     match_palette: bool = True
     bfloat16: Optional[bool] = None
+    border_margin: int = 8
+    preview_border_margin: int = 4
 
     def __post_init__(self) -> None:
+        for name in ("border_margin", "preview_border_margin"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 64:
+                raise InputError(name, f"must be an integer from 0 to 64 (pixels), got {value!r}")
         for name in ("decode_scale", "preview_decode_scale"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 8:
@@ -181,6 +196,22 @@ def style_feature_cache(encoder: StyleEncoder) -> StyleFeatureCache:
     if cache is None:
         cache = _CACHES[encoder] = StyleFeatureCache(encoder)
     return cache
+
+
+def _with_margin(camera: Cameras, height: int, margin: int, align: int) -> Tuple[Cameras, int]:
+    """``camera`` widened to render ``m`` more pixels on each side at the same focal length, and ``m``:
+    ``margin`` rounded up to a multiple of ``align`` (0 stays 0; less where the wider field of view would
+    pass :data:`~stylize3d_core.geometry.camera.MAX_FOV_DEG`)."""
+    if margin <= 0:
+        return camera, 0
+    m = -(-margin // align) * align
+    half = math.tan(math.radians(float(camera.fov_y_deg[0])) / 2.0)
+    while m > 0:
+        fov = math.degrees(2.0 * math.atan(half * (height + 2 * m) / height))
+        if fov <= MAX_FOV_DEG:
+            return Cameras.create(camera.cam_to_world, fov), m
+        m -= align
+    return camera, 0
 
 
 class Stylized3DPhoto:
@@ -357,7 +388,8 @@ class Stylized3DPhoto:
         instance) fits again."""
         st = self.settings
         key = (height, width, bool(preview), st.decode_bfloat16) + (
-            (st.preview_points_per_pixel, st.preview_decode_scale) if preview else ())
+            (st.preview_points_per_pixel, st.preview_decode_scale, st.preview_border_margin) if preview
+            else (st.border_margin,))
         pal = self._palettes.get(key)
         if pal is not None:
             return pal
@@ -416,15 +448,19 @@ class Stylized3DPhoto:
                                     self.settings.final_points_per_pixel)
         if not self.model.config.decoder.transform_channels:
             scale = 1  # split-resolution decoding needs the colour transform: full-size decoding
-        keep = n if per_pixel is None else self._strata.prefix(preview_point_count(n, height * ss, width * ss,
-                                                                                   per_pixel))
+        margin = self.settings.preview_border_margin if preview and not every_point else self.settings.border_margin
+        camera, m = _with_margin(camera, height, margin, (2 ** self.model.config.decoder.levels) * scale)
+        keep = n if per_pixel is None else self._strata.prefix(
+            preview_point_count(n, (height + 2 * m) * ss, (width + 2 * m) * ss, per_pixel))
         split = {} if scale == 1 else {"decode_scale": scale}
         with torch.inference_mode():
             if should_stop is not None and should_stop():
                 raise RenderInterrupted("render stopped before rasterizing")
-            rgb, _ = self.model.render_view(self._dense[:keep], self._xyz[:keep], camera, height, width,
-                                            supersample=ss, should_stop=should_stop,
+            rgb, _ = self.model.render_view(self._dense[:keep], self._xyz[:keep], camera, height + 2 * m,
+                                            width + 2 * m, supersample=ss, should_stop=should_stop,
                                             bfloat16=self.settings.decode_bfloat16, **split)
+            if m:
+                rgb = rgb[..., m : m + height, m : m + width]
             return torch.nan_to_num(rgb.float(), nan=0.0).clamp_(0.0, 1.0)  # float32 after a bfloat16 autocast
 
     def frames(self, cameras: Cameras, height: int, width: int) -> Iterator[np.ndarray]:
