@@ -86,11 +86,12 @@ class StylizeSettings:
         border_margin: pixels rendered beyond each side of a full frame and cut off (default 8; 0: none).
             The U-Net's zero padding makes its outermost ~8 pixels differ from what it decodes inside a
             frame (up to ~20 levels at the edge: a visible coloured rim); with the margin, the frame's edge
-            is decoded as its inside is, at ~6-8 % more pixels at 512 px. Rounded up to a multiple of the
+            is decoded as its inside is, at ~4 % more time at 512x342. Rounded up to a multiple of the
             decoder's stride (at split-resolution decoding, times the decode scale), so the frame keeps the
             decoder's grid phase.
         preview_border_margin: the same for previews (default 4: the rim is as wide at any size, so it covers
-            more of a small preview; 4 pixels take the edge's error from ~20 to ~7 levels at +2-10 % time).
+            more of a small preview; 4 pixels take the edge's error from ~20 to ~7 levels at +11-14 % time,
+            and the preview from 24.7 to 30.3 dB of the rim-free full frame).
     """
 
     strength: float = DEFAULT_STRENGTH
