@@ -44,7 +44,7 @@ import cv2
 import numpy as np
 
 from ..errors import InputError, PathLike
-from ..io.images import LoadedImage, apply_orientation, check_jpeg_structure, check_png_structure, encoded_image_size
+from ..io.images import LoadedImage, apply_orientation, check_jpeg_structure, check_png_structure, declared_pixels
 from ._util import resize_to
 from .types import DepthMap, DepthKind
 
@@ -204,14 +204,14 @@ def _decode_image(blob: bytes, name: str, what: str) -> np.ndarray:
     """
     if blob.startswith(_SIGNATURES["image/png"]):
         header = check_png_structure(blob, name)
-        w, h = header.width, header.height
+        pixels = header.width * header.height
     elif blob.startswith(_SIGNATURES["image/jpeg"]):
         check_jpeg_structure(blob, name)
-        w, h = encoded_image_size(blob) or (0, 0)
+        pixels = declared_pixels(blob) or 0
     else:
         raise InputError(name, f"{what} is not a readable PNG or JPEG image")
-    if w * h > MAX_PIXELS:
-        raise InputError(name, f"{what} declares {w * h:,} pixels, more than {MAX_PIXELS:,} (not a phone depth map)")
+    if pixels > MAX_PIXELS:
+        raise InputError(name, f"{what} declares {pixels:,} pixels, more than {MAX_PIXELS:,} (not a phone depth map)")
     img = cv2.imdecode(np.frombuffer(blob, np.uint8), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise InputError(name, f"{what} is not a readable PNG or JPEG image")

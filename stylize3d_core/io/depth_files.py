@@ -34,7 +34,7 @@ import numpy as np
 from ..checks import check_range
 from ..errors import ExportError, InputError, PathLike
 from .atomic import atomic_path
-from .images import check_png_structure, encoded_image_size, read_input_file
+from .images import check_png_structure, declared_pixels, read_input_file
 
 MAX_DEPTH_PIXELS = 150_000_000
 """Largest accepted H * W of a depth file (checked on the header for PNG and PFM)."""
@@ -170,10 +170,11 @@ def _read_values(path: PathLike) -> Tuple[np.ndarray, Optional[np.ndarray]]:
         header = check_png_structure(data, path)
         if header.width * header.height > MAX_DEPTH_PIXELS:
             raise InputError(path, f"PNG is {header.width} x {header.height} pixels, more than {MAX_DEPTH_PIXELS}")
-    else:  # TIFF/EXR: refuse a huge declared size before OpenCV allocates it
-        w, h = encoded_image_size(data) or (0, 0)
-        if w * h > MAX_DEPTH_PIXELS:
-            raise InputError(path, f"{suffix.lstrip('.').upper()} declares {w * h:,} pixels, more than {MAX_DEPTH_PIXELS:,}")
+    else:  # TIFF: a huge declared size is refused before OpenCV allocates it (Pillow cannot read EXR
+        # headers: those go to OpenCV unchecked, under its own limit of 2**30 pixels)
+        pixels = declared_pixels(data) or 0
+        if pixels > MAX_DEPTH_PIXELS:
+            raise InputError(path, f"{suffix.lstrip('.').upper()} declares {pixels:,} pixels, more than {MAX_DEPTH_PIXELS:,}")
     values, mask = _single_channel(_decode_with_opencv(data, path, suffix.lstrip(".").upper()), path)
     if values.dtype.kind not in "fiu":
         raise InputError(path, f"unsupported sample type {values.dtype}")

@@ -202,21 +202,21 @@ def check_jpeg_structure(data: bytes, source: PathLike) -> None:
     raise InputError(source, "JPEG file is truncated (no end-of-image marker)")
 
 
-def encoded_image_size(data: bytes) -> Optional[Tuple[int, int]]:
-    """(width, height) an encoded image's header declares, read by Pillow without decoding; None if unknown.
+def declared_pixels(data: bytes) -> Optional[int]:
+    """Width x height an encoded image's header declares, read by Pillow without decoding; None if Pillow
+    cannot read the header (EXR, for one).
 
-    For checking a size before a decoder (OpenCV's) allocates it: compare
-    ``width * height``. An image so large that Pillow refuses it as a
-    decompression bomb gives (pixel count from Pillow's error, 1), or (2**31, 1).
+    For checking a size before a decoder (OpenCV's) allocates it. An image so large that Pillow refuses it
+    as a decompression bomb gives the count from Pillow's error (or 2**31 if the error does not say).
     """
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", Image.DecompressionBombWarning)
             with Image.open(io.BytesIO(data)) as im:
-                return tuple(im.size)
+                return im.size[0] * im.size[1]
     except Image.DecompressionBombError as e:
         found = re.search(r"\((\d+) pixels\)", str(e))
-        return (int(found.group(1)) if found else 2**31, 1)
+        return int(found.group(1)) if found else 2**31
     except Exception:  # noqa: BLE001 -- any header Pillow cannot read: the size is unknown
         return None
 
