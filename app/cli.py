@@ -272,8 +272,10 @@ def main(argv: Optional[List[str]] = None) -> int:
     import warnings
 
     from app.entry import interrupted_message, interrupted_status, show_warning
+    from stylize3d_core.memory import keep_freed_memory
 
     args = build_parser().parse_args(argv)
+    keep_freed_memory()  # as the viewer: each frame's tensors reuse freed memory, not fresh pages
     shown, warnings.showwarning = warnings.showwarning, show_warning
     try:
         handlers = {"render": _render, "prepare-data": _prepare_data, "prepare-styles": _prepare_styles,

@@ -546,7 +546,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=2, help="drag pairs per settings in --interactive (default 2)")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
-    from app.viewer import keep_freed_memory
+    from stylize3d_core.memory import keep_freed_memory
 
     keep_freed_memory()  # as the viewer does (its window process does it itself)
     if args.window:

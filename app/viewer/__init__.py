@@ -27,6 +27,7 @@ from typing import List, Optional
 
 from stylize3d_core.defaults import DEFAULT_STRENGTH
 from stylize3d_core.errors import InputError
+from stylize3d_core.memory import keep_freed_memory
 from stylize3d_core.pipeline import PhotoSpec
 from stylize3d_core.resources import resolve_model
 
@@ -67,33 +68,6 @@ def build_parser() -> argparse.ArgumentParser:
 GUI_SWITCH_INTERVAL_S = 0.0005
 """``sys.setswitchinterval`` of the viewer: how long a thread may hold the GIL before another takes it."""
 
-KEEP_FREED_BYTES = 1 << 30
-"""glibc malloc's mmap and trim thresholds in the viewer (:func:`keep_freed_memory`)."""
-
-
-def keep_freed_memory() -> bool:
-    """Make glibc keep freed memory for reuse instead of returning it to the system (``mallopt``).
-
-    Every frame allocates and frees tens of megabytes of tensors (a 768x512 frame's 35 rasterized
-    channels are 55 MB); by default glibc serves each with a fresh ``mmap`` whose pages the kernel
-    zeroes on first touch, which took ~15 % of the compute worker's CPU (``perf``) and made an
-    allocate-fill loop 2.5-3x slower than with the memory kept (measured under load). The price:
-    the process keeps its peak memory. False where this is not glibc (nothing changes)."""
-    import ctypes
-    import ctypes.util
-
-    name = ctypes.util.find_library("c")
-    if not sys.platform.startswith("linux") or not name:
-        return False
-    try:
-        libc = ctypes.CDLL(name)
-        m_trim_threshold, m_mmap_threshold = -1, -3
-        return bool(libc.mallopt(m_mmap_threshold, KEEP_FREED_BYTES)) and bool(
-            libc.mallopt(m_trim_threshold, KEEP_FREED_BYTES))
-    except (OSError, AttributeError):  # not glibc
-        return False
-
-
 def main(argv: Optional[List[str]] = None) -> int:
     """Run the viewer until its window closes; returns the exit status (1 if a test script failed)."""
     args = build_parser().parse_args(argv)
@@ -128,7 +102,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     # GUI callback (mouse moves, ticks, frames handed over) could wait that long for the GIL, several times per
     # frame (measured: a busy Python thread cut an Open3D window's image updates from ~48 to ~21 per second).
     sys.setswitchinterval(GUI_SWITCH_INTERVAL_S)
-    keep_freed_memory()
+    keep_freed_memory()  # stylize3d_core.memory: freed memory kept for the next frame
 
     from .script import ScriptRunner, read_script
     from .window import ViewerOptions, ViewerWindow

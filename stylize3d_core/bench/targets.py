@@ -220,6 +220,9 @@ def run_targets(out: Path, quick: bool = False, show_progress: bool = False, log
 
 
 if __name__ == "__main__":
+    from ..memory import keep_freed_memory
+
+    keep_freed_memory()  # as the viewer and the command line do in their processes
     a = sys.argv[1:]
     print(json.dumps(measure(float(a[0]), int(a[1]), int(a[2]), int(a[3]), int(a[4]), (a[5:6] or [""])[0] or None,
                              (a[6:7] or [""])[0] or None)))

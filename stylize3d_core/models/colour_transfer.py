@@ -151,11 +151,33 @@ class ColourTransfer:
 
     def __init__(self, rgb: torch.Tensor) -> None:
         self.rgb = rgb.detach().float().clamp(0.0, 1.0)
-        self._lab = _to_lab(self.rgb.cpu().numpy()) if rgb.shape[0] else np.zeros((0, 3), np.float32)
-        n = self._lab.shape[0]
-        # in float64: the statistics (and so the colours) do not depend on the order of the points
-        self.stats = LabStats(self._lab.mean(0, dtype=np.float64).astype(np.float32) if n else np.zeros(3, np.float32),
-                              self._lab.std(0, dtype=np.float64).astype(np.float32) if n else np.zeros(3, np.float32))
+        src = self.rgb.cpu().numpy()
+        n = src.shape[0]
+        self._lab = np.empty((n, 3), np.float32)
+        starts = range(0, n, _CHUNK)
+        moments = [None] * len(starts)
+
+        def part(j: int) -> None:  # a chunk's L*a*b* and its float64 count, mean and sum of squared deviations
+            a = starts[j]
+            lab = self._lab[a:a + _CHUNK]
+            lab[:] = _to_lab(src[a:a + _CHUNK])
+            mean = lab.mean(0, dtype=np.float64)
+            moments[j] = (lab.shape[0], mean, np.square(lab - mean).sum(0))
+
+        if len(starts) > 1:  # numpy and OpenCV free the GIL on arrays this large (1.7M colours: 0.23 -> ~0.1 s)
+            list(_threads.pool().map(part, range(len(starts))))
+        elif n:
+            part(0)
+        # the chunks' moments combined (Chan et al.), in float64: the statistics (and so the colours) do not
+        # depend on the order of the points beyond float64 rounding, far below the float32 they are kept in
+        count, mean, m2 = 0, np.zeros(3, np.float64), np.zeros(3, np.float64)
+        for c, m, q in moments:
+            delta = m - mean
+            total = count + c
+            mean = mean + delta * (c / total)
+            m2 = m2 + q + delta * delta * (count * c / total)
+            count = total
+        self.stats = LabStats(mean.astype(np.float32), np.sqrt(m2 / max(count, 1)).astype(np.float32))
 
     def __call__(self, style: LabStats, strength: float = 1.0) -> torch.Tensor:
         """(N, 3) float32 in [0, 1], finite, on the colours' device; strength 0 returns the colours."""

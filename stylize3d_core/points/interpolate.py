@@ -20,10 +20,10 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import torch
-import torch.nn.functional as F
 
 from ..checks import check_finite, check_shape
 from ..errors import InputError
+from ..threads import embedding_bag_sum
 from .neighbours import KNNResult, knn
 
 IDW_EPS = 1e-8
@@ -120,4 +120,4 @@ def interpolate(features: torch.Tensor, idx: torch.Tensor, weight: torch.Tensor)
         raise InputError("idx", f"indices must lie in [0, {features.shape[0]}), got [{lo}, {hi}]")
     check_finite(weight, "weight")
     w = weight.to(features.dtype)  # (N, K)
-    return F.embedding_bag(idx, features, mode="sum", per_sample_weights=w)  # (N, C)
+    return embedding_bag_sum(idx, features, w)  # (N, C); on the pool's threads at inference
