@@ -459,7 +459,7 @@ class Stylized3DPhoto:
                 raise RenderInterrupted("render stopped before rasterizing")
             rgb, _ = self.model.render_view(self._dense[:keep], self._xyz[:keep], camera, height + 2 * m,
                                             width + 2 * m, supersample=ss, should_stop=should_stop,
-                                            bfloat16=st.decode_bfloat16, **split)
+                                            bfloat16=st.decode_bfloat16, features_finite=True, **split)
             if m:
                 rgb = rgb[..., m : m + height, m : m + width]
             return torch.nan_to_num(rgb.float(), nan=0.0).clamp_(0.0, 1.0)  # float32 after a bfloat16 autocast

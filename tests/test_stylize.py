@@ -438,3 +438,22 @@ def test_border_margin_decodes_the_frame_edge_as_its_inside():
           f"{255 * err_guarded:.2f} with it")
     assert err_plain > 4 / 255  # the rim this guards against is there
     assert err_guarded < 0.2 * err_plain
+
+
+def test_a_model_that_makes_non_finite_features_is_refused_once(tmp_path):
+    """The renderer checks the dense features once when they are made (the rasterizer is told they are
+    finite, frame after frame): weights far too large, finite themselves, are refused there, naming the
+    checkpoint."""
+    torch.manual_seed(0)
+    model = Stylize3DModel(ModelConfig.lite())
+    with torch.no_grad():
+        for p in model.encoder.parameters():
+            p.mul_(1e15)
+    path = save_checkpoint(tmp_path / "huge.safetensors", model, 2, {})
+    g = np.random.default_rng(1)
+    rgb = g.random((24, 32, 3), dtype=np.float32)
+    depth = np.ones((24, 32), np.float32)
+    photo = Photo3D.build(rgb, DepthMap(depth, np.ones_like(depth, bool), "metric", "test"))
+    st = Stylized3DPhoto(photo, path, StylizeSettings(bfloat16=False))
+    with pytest.raises(InputError, match="NaN or infinite features"):
+        st.render(Cameras.identity(photo.fov_y_deg), 24, 32)

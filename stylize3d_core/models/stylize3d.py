@@ -209,7 +209,7 @@ class Stylize3DModel(nn.Module):
     def render_view(
         self, dense: torch.Tensor, xyz: torch.Tensor, camera: Cameras, height: int, width: int,
         supersample: int = 1, should_stop: Optional[Callable[[], bool]] = None, *,
-        decode_scale: int = 1, bfloat16: bool = False,
+        decode_scale: int = 1, bfloat16: bool = False, features_finite: bool = False,
     ) -> Tuple[torch.Tensor, Fragments]:
         """Decode one view: (3, H, W) RGB in (0, 1) and the rasterizer's fragments.
 
@@ -225,26 +225,31 @@ class Stylize3DModel(nn.Module):
 
         ``bfloat16``: the decoder runs under a bfloat16 autocast (inference only; see
         ``UNetDecoder.forward``); the rasterizer stays float32 and the result is float32.
+
+        ``features_finite``: the caller has checked that ``dense`` is finite (the rasterizer does not sum
+        it again; see :func:`~stylize3d_core.render.rasterize.rasterize_points`).
         """
         if isinstance(decode_scale, bool) or not isinstance(decode_scale, int) or not 1 <= decode_scale <= 8:
             raise InputError("decode_scale", f"must be an integer from 1 to 8, got {decode_scale!r}")
         settings = RasterSettings(height=int(height), width=int(width), supersample=supersample)
         if decode_scale > 1:
-            return self._render_split(dense, xyz, camera, settings, decode_scale, should_stop, bfloat16)
-        frags = PointRasterizer(settings)(xyz, dense, camera, should_stop=should_stop)
+            return self._render_split(dense, xyz, camera, settings, decode_scale, should_stop, bfloat16,
+                                      features_finite)
+        frags = PointRasterizer(settings)(xyz, dense, camera, should_stop=should_stop, features_finite=features_finite)
         features = frags.image.unsqueeze(0)  # (1, Cr, H, W)
         mask = (~frags.hole).to(features.dtype)[None, None]  # (1, 1, H, W)
         rgb = self.decoder(features, mask, should_stop=should_stop, bfloat16=bfloat16)[0]  # (3, H, W)
         return rgb, frags
 
     def _render_split(self, dense: torch.Tensor, xyz: torch.Tensor, camera: Cameras, settings: RasterSettings,
-                      scale: int, should_stop, bfloat16: bool = False) -> Tuple[torch.Tensor, Fragments]:
+                      scale: int, should_stop, bfloat16: bool = False,
+                      features_finite: bool = False) -> Tuple[torch.Tensor, Fragments]:
         """``render_view`` with split-resolution decoding (``decode_scale`` > 1)."""
         d = self.config.decoder.transform_channels
         if not d or self.config.decoder.supersample:
             raise InputError("decode_scale", "split-resolution decoding needs a model with the colour transform "
                              "(decoder.transform_channels 3) and without decoder supersampling")
-        frags = PointRasterizer(settings)(xyz, dense, camera, should_stop=should_stop)
+        frags = PointRasterizer(settings)(xyz, dense, camera, should_stop=should_stop, features_finite=features_finite)
         image = frags.image.unsqueeze(0)  # (1, Cr + D, H, W), channels-last
         coverage = (~frags.hole).to(image.dtype)[None, None]  # (1, 1, H, W)
         features, mask = pool_features(image, coverage, scale)  # (1, Cr + D, h, w), (1, 1, h, w)

@@ -52,7 +52,7 @@ class PointRasterizer(nn.Module):
 
     def forward(self, points_world: torch.Tensor, features: torch.Tensor, cameras: Cameras,
                 point_size: Optional[torch.Tensor] = None, *,
-                should_stop: Optional[Callable[[], bool]] = None) -> Fragments:
+                should_stop: Optional[Callable[[], bool]] = None, features_finite: bool = False) -> Fragments:
         """Render ``features`` at ``points_world`` from the single camera in ``cameras``.
 
         Args:
@@ -63,6 +63,7 @@ class PointRasterizer(nn.Module):
                 grows with magnification, see :func:`rasterize_points`).
             should_stop: checked between chunks of points (see :func:`rasterize_points`);
                 True stops with :class:`~stylize3d_core.errors.RenderInterrupted`.
+            features_finite: the caller has checked the features are finite (see :func:`rasterize_points`).
         Returns:
             :class:`Fragments` ``image (C, H, W), weight (H, W), depth (H, W), hole (H, W)``.
         """
@@ -77,7 +78,8 @@ class PointRasterizer(nn.Module):
         world_to_cam = cameras.world_to_cam()[0].to(device=device, dtype=dtype)  # (4, 4)
         points_cam = camera_points(world_to_cam, points_world.detach())  # (N, 3)
         K = cameras.intrinsics(self.settings.height, self.settings.width, dtype=dtype)[0].to(device)  # (3, 3)
-        return rasterize_points(points_cam, features, K, self.settings, point_size, should_stop=should_stop)
+        return rasterize_points(points_cam, features, K, self.settings, point_size, should_stop=should_stop,
+                                features_finite=features_finite)
 
     def extra_repr(self) -> str:
         return repr(self.settings)

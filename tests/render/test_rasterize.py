@@ -725,3 +725,21 @@ def test_blend_coverage_matches_reference_and_chunks(supersample, soft_edges, se
         assert blended > 0  # some pixels were blended (with point sizes)
     else:  # the sub-pixel z-buffer anti-aliases instead
         assert blended == 0
+
+
+def test_features_finite_skips_only_the_features_sum_and_gives_the_same_image():
+    """``features_finite``: the caller checked the features (a renderer drawing one set frame after frame);
+    the image is the checked call's, bit for bit, and every other check still runs."""
+    K = simple_K()
+    s = RasterSettings(6, 8)
+    g = torch.Generator().manual_seed(3)
+    pts = torch.rand(40, 3, generator=g, dtype=F64) + torch.tensor([0.0, 0.0, 1.0], dtype=F64)
+    feats = torch.rand(40, 4, generator=g, dtype=F64)
+    a, b = rasterize_points(pts, feats, K, s), rasterize_points(pts, feats, K, s, features_finite=True)
+    assert torch.equal(a.image, b.image) and torch.equal(a.weight, b.weight) and torch.equal(a.hole, b.hole)
+    with pytest.raises(InputError, match="features"):  # unchecked by default
+        rasterize_points(pts, torch.full((40, 4), math.nan, dtype=F64), K, s)
+    with pytest.raises(InputError, match="K"):
+        rasterize_points(pts, feats, K * math.inf, s, features_finite=True)
+    with pytest.raises(InputError, match="features"):
+        rasterize_points(pts, feats[:5], K, s, features_finite=True)
