@@ -55,6 +55,9 @@ def run_parts(jobs: List[Tuple[Callable, tuple]]) -> None:
 PARALLEL_BAG_TAPS = 1 << 16
 """Below this many (index, weight) taps :func:`embedding_bag_sum` runs one call (the pool costs more)."""
 
+BAG_CHUNK = 1 << 16
+"""Bags :func:`embedding_bag_sum` sums per call on a thread (its result copied out while in the cache)."""
+
 
 def embedding_bag_sum(index: torch.Tensor, table: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
     """``F.embedding_bag(index, table, mode="sum", per_sample_weights=weight)``, the bags split into
@@ -81,7 +84,9 @@ def embedding_bag_sum(index: torch.Tensor, table: torch.Tensor, weight: torch.Te
 
     def job(a: int, b: int) -> None:  # on a thread of the pool, in the caller's (thread-local) modes
         with torch.inference_mode(inference), torch.set_grad_enabled(grad_on):
-            out[a:b].copy_(F.embedding_bag(index[a:b], table, mode="sum", per_sample_weights=weight[a:b]))
+            for c in range(a, b, BAG_CHUNK):  # in chunks: the temporaries stay small (no second (B, C) tensor)
+                d = min(b, c + BAG_CHUNK)
+                out[c:d].copy_(F.embedding_bag(index[c:d], table, mode="sum", per_sample_weights=weight[c:d]))
 
     run_parts([(job, r) for r in parts(index.shape[0], k)])
     return out

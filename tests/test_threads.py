@@ -41,10 +41,11 @@ def test_threads_follow_torch():
 
 def test_embedding_bag_sum_in_parts_is_bit_identical(monkeypatch):
     """Bags summed on the pool's threads: the one call's result bit for bit, in inference mode, under
-    no_grad and plain (three parts, the last one short)."""
+    no_grad and plain (three parts of chunks, the last ones short)."""
     import torch.nn.functional as F
 
     monkeypatch.setattr(threads, "PARALLEL_BAG_TAPS", 1)
+    monkeypatch.setattr(threads, "BAG_CHUNK", 1000)
     monkeypatch.setattr(threads, "threads", lambda: 3)
     g = torch.Generator().manual_seed(1)
     table = torch.randn(500, 7, generator=g)
