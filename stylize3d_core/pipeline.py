@@ -6,6 +6,7 @@ setting is a documented dataclass field.
 
 from __future__ import annotations
 
+import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
@@ -260,6 +261,31 @@ def _load_photo3d(spec: PhotoSpec, log: Log) -> Tuple[Photo3D, Tuple[int, int]]:
         f"{len(p3d.points):,} points ({'with' if p3d.ldi.inpainted else 'no'} hidden layer)"
     )
     return p3d, image.original_size
+
+
+def warm_up(wait: bool = False) -> float:
+    """Pay the once-per-process costs of the first photo ahead of it: import the depth sources (OpenCV's
+    contrib modules, onnxruntime's loader), start the farthest-point-sampling worker process and load the
+    rasterizer's compiled kernels (Numba). Each would otherwise run beside, and slow, the first photo's
+    depth, LDI and geometry: the viewer calls this at start, while its window opens. ``wait``: return
+    when all of it is done (the benchmarks time a photo after it). Returns the seconds it took."""
+    from .points.sampling import wait_for_fps_process
+    from .render.rasterize_fast import wait_warm, warm_up_async
+
+    t0 = time.perf_counter()
+    start_fps_process()
+    warm_up_async()
+    if wait:
+        _import_depth_sources()
+        wait_warm()
+        wait_for_fps_process()
+    else:
+        threading.Thread(target=_import_depth_sources, name="stylize3d-import-depth", daemon=True).start()
+    return time.perf_counter() - t0
+
+
+def _import_depth_sources() -> None:
+    from .depth import sources  # noqa: F401 (imported lazily by load_photo3d)
 
 
 def prefetch_style(style_rgb: np.ndarray, encoder=None) -> Future:

@@ -40,3 +40,18 @@ def test_prefetch_reraises_the_workers_error():
     bad = np.full((8, 8, 3), np.nan, np.float32)
     with pytest.raises(InputError, match="style image"):
         prefetch_style(bad, StyleEncoder()).result()
+
+
+def test_warm_up_waits_for_the_fps_worker_and_the_kernels():
+    """``warm_up(wait=True)`` returns with the FPS worker process answering and the rasterizer's kernels
+    loaded; a second call finds everything running and returns at once."""
+    from stylize3d_core.pipeline import warm_up
+    from stylize3d_core.points import sampling
+    from stylize3d_core.render import rasterize_fast
+
+    first = warm_up(wait=True)
+    assert first >= 0.0
+    if sampling._WORKER.enabled:
+        assert sampling._WORKER._ready and sampling._WORKER._proc.poll() is None
+    assert rasterize_fast._WARM is not None and not rasterize_fast._WARM.is_alive()
+    assert warm_up(wait=True) < 1.0

@@ -103,6 +103,9 @@ def main(argv: Optional[List[str]] = None) -> int:
     # frame (measured: a busy Python thread cut an Open3D window's image updates from ~48 to ~21 per second).
     sys.setswitchinterval(GUI_SWITCH_INTERVAL_S)
     keep_freed_memory()  # stylize3d_core.memory: freed memory kept for the next frame
+    from stylize3d_core.pipeline import warm_up
+
+    warm_up()  # in the background while the window opens: the first photo's once-per-process costs
 
     from .script import ScriptRunner, read_script
     from .window import ViewerOptions, ViewerWindow

@@ -92,6 +92,28 @@ class _Worker:
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env, bufsize=0)
         self._ready = False
 
+    def wait_ready(self, timeout: float = 60.0) -> bool:
+        """Start the process if needed and wait until its imports are done (True; False if it is disabled,
+        failed or did not answer within ``timeout`` seconds: the first sampling then waits or falls back)."""
+        if not self.enabled:
+            return False
+        with self._lock:
+            try:
+                self._spawn()
+                if not self._ready:
+                    import select
+
+                    readable, _, _ = select.select([self._proc.stdout], [], [], timeout)
+                    if not readable:
+                        return False
+                    if self._read(1) != b"R":
+                        raise EOFError("the worker process did not start")
+                    self._ready = True
+            except (OSError, EOFError, ValueError):
+                self._stop()
+                return False
+        return True
+
     def _write(self, view: memoryview) -> None:
         while len(view):
             view = view[self._proc.stdin.write(view):]  # an unbuffered pipe may take part of it
@@ -173,6 +195,11 @@ def start_fps_process() -> None:
         except OSError as e:
             warnings.warn(f"could not start the farthest point sampling worker ({e}); sampling in this process")
             _WORKER.enabled = False
+
+
+def wait_for_fps_process(timeout: float = 60.0) -> bool:
+    """Start the worker process (if enabled) and wait until it is ready to sample (see :meth:`_Worker.wait_ready`)."""
+    return _WORKER.wait_ready(timeout)
 
 
 def _fpsample(pts: np.ndarray, n_samples: int, height: int, start: int) -> np.ndarray:

@@ -67,6 +67,12 @@ def warm_up_async() -> None:
             _WARM.start()
 
 
+def wait_warm(timeout: Optional[float] = None) -> None:
+    """Start the warm-up if needed (:func:`warm_up_async`) and wait until the kernels are loaded."""
+    warm_up_async()
+    _WARM.join(timeout)
+
+
 def _warm_up() -> None:
     try:
         if not available():
