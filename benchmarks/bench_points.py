@@ -6,7 +6,8 @@ as a layered depth image gives):
 
 * FPS N -> N/4 (fpsample bucket FPS);
 * ball query, k = 16, r = 0.015, all N points among all N (the stem's, the
-  largest search), by the chosen method (Open3D k-NN + radius mask) and by the
+  largest search), by the chosen method (k-NN + radius mask, on the grid search
+  ``points.neighbours.GridKNN``; also on Open3D's k-d tree, ``BACKEND`` "open3d") and by the
   alternatives: scipy's cKDTree (if installed) and Open3D's ``hybrid_search``
   (only up to ``--hybrid-max`` points: it is far slower);
 * three_nn: all N points from the N/16 encoder output points;
@@ -31,6 +32,7 @@ from stylize3d_core.eval.timing import median_time, peak_rss_gib
 from stylize3d_core.models.encoder import Encoder, EncoderConfig
 from stylize3d_core.models.scene_geometry import NeighbourhoodConfig, build_hierarchy
 from stylize3d_core.points import ball_query, farthest_point_sample, three_nn
+from stylize3d_core.points import neighbours
 
 
 def photo_cloud(n_points: int, seed: int = 0) -> torch.Tensor:
@@ -95,10 +97,15 @@ def main() -> None:
         rgb = torch.rand(n, 3)
         r, k = hood.stem_radius, hood.k
         t_fps = median_time(lambda: farthest_point_sample(xyz, n // 4), args.repeats)
-        t_bq = median_time(lambda: ball_query(xyz, xyz, r, k), args.repeats)
-        fill = float(ball_query(xyz, xyz, r, k).count.float().mean())
         sparse = xyz[farthest_point_sample(xyz, max(1, n // 16))]
-        t_3nn = median_time(lambda: three_nn(xyz, sparse), args.repeats)
+        t_bq, t_3nn = {}, {}
+        default = neighbours.BACKEND
+        for backend in neighbours.BACKENDS:
+            neighbours.BACKEND = backend
+            t_bq[backend] = median_time(lambda: ball_query(xyz, xyz, r, k), args.repeats)
+            t_3nn[backend] = median_time(lambda: three_nn(xyz, sparse), args.repeats)
+        neighbours.BACKEND = default
+        fill = float(ball_query(xyz, xyz, r, k).count.float().mean())
         t_build = median_time(lambda: build_hierarchy(xyz, hood), args.repeats)
         hier = build_hierarchy(xyz, hood)
         with torch.inference_mode():
@@ -106,7 +113,8 @@ def main() -> None:
             t_lite = median_time(lambda: enc_lite(rgb, hier), args.repeats)
         print(f"\nN = {n:,} (levels {hier.num_points})")
         print(f"  FPS N -> N/4                   {t_fps:7.3f}")
-        print(f"  ball query N x N, r={r}, k={k} {t_bq:7.3f}   (Open3D k-NN + mask; mean fill {fill:.1f}/{k})")
+        print(f"  ball query N x N, r={r}, k={k} {t_bq['grid']:7.3f}   (grid k-NN + mask; mean fill {fill:.1f}/{k}); "
+              f"on Open3D's k-d tree {t_bq['open3d']:.3f}")
         if not args.no_alternatives:
             try:
                 print(f"    alternative: scipy cKDTree   {bench_scipy(xyz, r, k):7.3f}")
@@ -114,7 +122,7 @@ def main() -> None:
                 print("    alternative: scipy cKDTree   (scipy not installed)")
             if n <= args.hybrid_max:
                 print(f"    alternative: O3D hybrid      {bench_hybrid(xyz, r, k):7.3f}")
-        print(f"  three_nn N from N/16           {t_3nn:7.3f}")
+        print(f"  three_nn N from N/16           {t_3nn['grid']:7.3f}   (grid); on Open3D's k-d tree {t_3nn['open3d']:.3f}")
         print(f"  build_hierarchy (all levels)   {t_build:7.3f}")
         print(f"  encoder forward, paper         {t_enc:7.3f}")
         print(f"  encoder forward, lite          {t_lite:7.3f}")

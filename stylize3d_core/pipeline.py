@@ -266,7 +266,7 @@ def _load_photo3d(spec: PhotoSpec, log: Log) -> Tuple[Photo3D, Tuple[int, int]]:
 def warm_up(wait: bool = False) -> float:
     """Pay the once-per-process costs of the first photo ahead of it: import the depth sources (OpenCV's
     contrib modules, onnxruntime's loader), start the farthest-point-sampling worker process and load the
-    rasterizer's compiled kernels (Numba). Each would otherwise run beside, and slow, the first photo's
+    k-NN grid's and the rasterizer's compiled kernels (Numba). Each would otherwise run beside, and slow, the first photo's
     depth, LDI and geometry: the viewer calls this at start, while its window opens. ``wait``: return
     when all of it is done (the benchmarks time a photo after it). Returns the seconds it took."""
     from .points.sampling import wait_for_fps_process
@@ -276,16 +276,22 @@ def warm_up(wait: bool = False) -> float:
     start_fps_process()
     warm_up_async()
     if wait:
-        _import_depth_sources()
+        _import_and_load()
         wait_warm()
         wait_for_fps_process()
     else:
-        threading.Thread(target=_import_depth_sources, name="stylize3d-import-depth", daemon=True).start()
+        threading.Thread(target=_import_and_load, name="stylize3d-warm-up", daemon=True).start()
     return time.perf_counter() - t0
 
 
-def _import_depth_sources() -> None:
+def _import_and_load() -> None:
     from .depth import sources  # noqa: F401 (imported lazily by load_photo3d)
+    from .points.neighbours import warm_up as load_grid_search
+
+    try:
+        load_grid_search()  # the k-NN grid's Numba kernels
+    except Exception:  # noqa: BLE001 (a failed warm-up is only a slower first photo; the search reports)
+        pass
 
 
 def prefetch_style(style_rgb: np.ndarray, encoder=None) -> Future:

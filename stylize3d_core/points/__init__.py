@@ -2,8 +2,9 @@
 
 * :func:`farthest_point_sample` -- FPS indices (exact FPS, via ``fpsample``);
 * :func:`knn`, :func:`ball_query` -- k nearest / radius-bounded k nearest
-  neighbours, nearest first (Open3D k-d tree; :class:`KNNIndex` to search one cloud
-  several times, :func:`ball_from_knn` for any radius from one k-NN search);
+  neighbours, nearest first (an exact Numba grid search, Open3D's k-d tree where Numba
+  is missing; :class:`KNNIndex` to search one cloud several times, :func:`ball_from_knn`
+  for any radius from one k-NN search);
 * :func:`idw_neighbours` (:func:`three_nn`), :func:`interpolate` -- inverse-distance-weighted upsampling
   of features from sparse to dense points.
 
