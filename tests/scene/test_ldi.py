@@ -455,16 +455,25 @@ def test_windowed_fit_at_few_pixels_matches_the_blurred_fit(monkeypatch):
     dense = fill.local_linear_fit(values, weight, 2.0, **kwargs)
     monkeypatch.setattr(fill, "_WINDOW_COST", 10**9)  # sum the windows
     windowed = fill.local_linear_fit(values, weight, 2.0, **kwargs)
-    for name, a, b in zip(dense._fields, dense, windowed):
-        assert a.shape == b.shape, name
-        np.testing.assert_allclose(b[where], a[where], atol=2e-3 if name == "trust" else 2e-4, err_msg=name)
-        assert not b[~where].any(), name  # 0 where not asked
+    n = int(where.sum())
+    for fit in (dense, windowed):  # compact: one row per asked pixel, in raster order
+        assert fit.index.shape == (h, w) and (fit.index[~where] == -1).all()
+        np.testing.assert_array_equal(fit.index[where], np.arange(n))
+    for name in ("mean", "centre", "grad", "support", "trust"):
+        a, b = getattr(dense, name), getattr(windowed, name)
+        assert a.shape == b.shape and a.shape[0] == n, name
+        np.testing.assert_allclose(b, a, atol=2e-3 if name == "trust" else 2e-4, err_msg=name)
+    some = np.nonzero(where)
+    picked = windowed.at(some[0][::3], some[1][::3])
+    np.testing.assert_array_equal(picked.mean, windowed.mean[::3])
+    with pytest.raises(ValueError, match="does not hold"):
+        windowed.at(np.array([1]), np.array([1])) if not where[1, 1] else windowed.at(*np.nonzero(~where))
     # a plane far from the image's centre: the window sums are taken about each pixel, so its
     # gradient is exact where the blurred image-wide moments lose digits in float32
     yy, xx = np.mgrid[:h, :w].astype(np.float64)
     plane = (0.3 + 0.01 * xx + 0.002 * yy)[..., None]
     fit = fill.local_linear_fit(plane, weight, 2.0, ridge=0.0, where=where)
-    np.testing.assert_allclose(fit.grad[where][:, 0], np.broadcast_to([0.01, 0.002], (where.sum(), 2)), atol=1e-6)
+    np.testing.assert_allclose(fit.grad[:, 0], np.broadcast_to([0.01, 0.002], (where.sum(), 2)), atol=1e-6)
 
 
 def test_scan_nearest_at_some_pixels_matches_the_full_scan():
