@@ -1,7 +1,9 @@
 """A small shared thread pool for work that releases the GIL: the compiled rasterizer's passes
 (``render/rasterize_fast.py``: contiguous parts of a range, one per thread), the colour transfer's
-chunks (``models/colour_transfer.py``) and weighted sums of table rows (:func:`embedding_bag_sum`: the
-rasterizer's splat sums and the 3-NN upsampling, ``points/interpolate.py``)."""
+chunks (``models/colour_transfer.py``), the k-NN grid's queries (``points/neighbours.py``) and the 3-NN
+upsampling's weighted sums (``points/interpolate.py``). Jobs on it call Numba, numpy or OpenCV, not
+PyTorch: a PyTorch call gives its thread an OpenMP team of its own, which slowed the main thread's
+later parallel regions (see ``points/interpolate.py``)."""
 
 from __future__ import annotations
 
@@ -11,7 +13,6 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Callable, List, Optional, Tuple
 
 import torch
-import torch.nn.functional as F
 
 THREADS = max(1, min(4, os.cpu_count() or 1))
 """Threads of the pool (the rasterizer uses at most torch's thread count of them)."""
@@ -51,42 +52,3 @@ def run_parts(jobs: List[Tuple[Callable, tuple]]) -> None:
         for f in futures:
             f.result()
 
-
-PARALLEL_BAG_TAPS = 1 << 16
-"""Below this many (index, weight) taps :func:`embedding_bag_sum` runs one call (the pool costs more)."""
-
-BAG_CHUNK = 1 << 16
-"""Bags :func:`embedding_bag_sum` sums per call on a thread (its result copied out while in the cache)."""
-
-
-def embedding_bag_sum(index: torch.Tensor, table: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
-    """``F.embedding_bag(index, table, mode="sum", per_sample_weights=weight)``, the bags split into
-    contiguous parts summed on the pool's threads.
-
-    PyTorch's CPU kernel of a weighted sum runs on one thread (1.7M bags of 3 rows of 35 channels: 0.47 s
-    on this 2-core machine; in two parts 0.12-0.2 s). Each bag is summed by the same kernel in the same
-    order whatever part it falls in, so the result is bit-identical to one call. Inference only: under
-    autograd (a table or weights that require grad) it is the one call, whose backward PyTorch provides.
-    (The rasterizer's bags, of varying size over a table in random order, gained nothing in parts: its
-    sums are bound by memory, not by the one thread.)
-
-    Args:
-        index: (B, K) long rows of ``table``, K per bag.
-        table: (M, C) rows.
-        weight: (B, K) weights, the table's dtype.
-    """
-    k = threads()
-    grad = torch.is_grad_enabled() and (table.requires_grad or weight.requires_grad)
-    if k == 1 or index.numel() < PARALLEL_BAG_TAPS or grad:
-        return F.embedding_bag(index, table, mode="sum", per_sample_weights=weight)
-    out = torch.empty(index.shape[0], table.shape[1], dtype=table.dtype)
-    inference, grad_on = torch.is_inference_mode_enabled(), torch.is_grad_enabled()
-
-    def job(a: int, b: int) -> None:  # on a thread of the pool, in the caller's (thread-local) modes
-        with torch.inference_mode(inference), torch.set_grad_enabled(grad_on):
-            for c in range(a, b, BAG_CHUNK):  # in chunks: the temporaries stay small (no second (B, C) tensor)
-                d = min(b, c + BAG_CHUNK)
-                out[c:d].copy_(F.embedding_bag(index[c:d], table, mode="sum", per_sample_weights=weight[c:d]))
-
-    run_parts([(job, r) for r in parts(index.shape[0], k)])
-    return out

@@ -38,32 +38,3 @@ def test_threads_follow_torch():
         torch.set_num_threads(before)
     assert 1 <= threads.threads() <= threads.THREADS
 
-
-def test_embedding_bag_sum_in_parts_is_bit_identical(monkeypatch):
-    """Bags summed on the pool's threads: the one call's result bit for bit, in inference mode, under
-    no_grad and plain (three parts of chunks, the last ones short)."""
-    import torch.nn.functional as F
-
-    monkeypatch.setattr(threads, "PARALLEL_BAG_TAPS", 1)
-    monkeypatch.setattr(threads, "BAG_CHUNK", 1000)
-    monkeypatch.setattr(threads, "threads", lambda: 3)
-    g = torch.Generator().manual_seed(1)
-    table = torch.randn(500, 7, generator=g)
-    index = torch.randint(0, 500, (10_001, 3), generator=g)
-    weight = torch.rand(10_001, 3, generator=g)
-    ref = F.embedding_bag(index, table, mode="sum", per_sample_weights=weight)
-    for mode in (torch.inference_mode, torch.no_grad, torch.enable_grad):
-        with mode():
-            out = threads.embedding_bag_sum(index, table, weight)
-        assert out.shape == (10_001, 7) and torch.equal(out, ref)
-    assert threads.embedding_bag_sum(index[:0], table, weight[:0]).shape == (0, 7)
-
-
-def test_embedding_bag_sum_keeps_gradients_under_autograd(monkeypatch):
-    monkeypatch.setattr(threads, "PARALLEL_BAG_TAPS", 1)
-    table = torch.randn(20, 4, requires_grad=True)
-    index = torch.randint(0, 20, (300, 3))
-    weight = torch.rand(300, 3)
-    threads.embedding_bag_sum(index, table, weight).sum().backward()
-    expected = torch.zeros(20).index_add_(0, index.reshape(-1), weight.reshape(-1))
-    torch.testing.assert_close(table.grad, expected[:, None].expand(20, 4))

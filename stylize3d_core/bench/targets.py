@@ -6,9 +6,9 @@ resident memory is its own. The 1 MP process (the sample photo resized to 1 MP, 
 style CNN loaded beforehand (not counted):
 
 * first frame: photo file + style image -> the first stylized 512-pixel frame in a process that has
-  paid its once-per-process costs, as the viewer has when a photo is opened (timed apart: importing
-  open3d.core, which the geometry's k-NN imports, and ``pipeline.warm_up``, which the viewer runs at
-  start: the depth modules' imports, the FPS worker process, the rasterizer's Numba kernels): read, prior depth, LDI, points, with
+  paid its once-per-process costs, as the viewer has when a photo is opened (timed apart:
+  ``pipeline.warm_up``, which the viewer runs at start: the depth modules' imports, the FPS worker
+  process, the Numba kernels of the k-NN grid, the upsampling and the rasterizer): read, prior depth, LDI, points, with
   the style CNN in a worker thread meanwhile (``pipeline.prefetch_style``, as ``stylize3d render``
   does), then geometry, encoding, AdaAttN, upsampling, rasterization, decode; in seconds of wall
   time and of the process's CPU time (all threads; steadier on a shared machine);
@@ -88,10 +88,6 @@ def measure(megapixels: float, frame: int, preview: int, video_frames: int, rend
     encoder = StyleEncoder()
     style_path = str(style_image())
     out: dict = {"threads": torch.get_num_threads()}
-    t0 = time.perf_counter()
-    import open3d.core  # noqa: F401 (k-NN of the geometry: imported once per process, loaded in the viewer)
-
-    out["open3d_import_s"] = time.perf_counter() - t0
     out["warm_up_s"] = warm_up(wait=True)  # once per process, as the viewer does at start (not counted)
     with tempfile.TemporaryDirectory() as tmp:
         path = photo_at_megapixels(megapixels, Path(tmp), photo)
@@ -213,8 +209,8 @@ def run_targets(out: Path, quick: bool = False, show_progress: bool = False, log
         "renders a point subset (StylizeSettings.preview_points_per_pixel)",
         f"first frame {one['first_frame_s']:.2f} s wall, {one['first_frame_cpu_s']:.2f} s CPU (all threads); "
         f"its stages (s): {stages}; not counted, like the model's loading, once per process (the viewer pays "
-        f"them at start): importing open3d.core (the geometry's k-NN) {one['open3d_import_s']:.2f} s, "
-        f"pipeline.warm_up (depth modules, FPS worker process, Numba kernels) {one['warm_up_s']:.2f} s",
+        f"them at start): pipeline.warm_up (depth modules, FPS worker process, Numba kernels) "
+        f"{one['warm_up_s']:.2f} s (Open3D is no longer imported on this path: the k-NN runs on its grid)",
         f"export default: {one['export_settings']}; peak memory at 1 MP {one['peak_rss_gib']:.2f} GiB",
         "decoder in bfloat16 (StylizeSettings.bfloat16 None: this CPU computes bfloat16 natively): "
         f"{'yes' if one.get('bfloat16') else 'no'}; the references of the error rows are float32",
