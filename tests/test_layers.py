@@ -18,7 +18,7 @@ LAYERS: Tuple[Tuple[str, ...], ...] = (
     ("options",),
     ("defaults",),
     ("resources",),
-    ("threads",),
+    ("threads", "memory"),
     ("geometry",),
     ("io",),
     ("depth",),
