@@ -112,6 +112,9 @@ GRID_MAX_CELLS_PER_POINT = 16
 """The grid has at most this many cells per point (and at least 4096 in all): a photo's cloud is a
 surface, most cells of its bounding box are empty, and coarser cells hold tens of points each."""
 
+GRID_MAX_CELLS = 1 << 24
+"""And at most this many in all (its cell table: 128 MB), whatever the cloud's size."""
+
 
 class GridKNN:
     """Exact k-NN of query points among fixed ``source`` points on a uniform grid (Numba kernels).
@@ -145,7 +148,7 @@ class GridKNN:
         h = d * math.sqrt(max(1, k))  # a cube of 3x3x3 cells holds about k points of a surface
         if not (math.isfinite(h) and h > 0):
             h = float(extent.max()) if extent.max() > 0 else 1.0
-        cap = max(GRID_MAX_CELLS_PER_POINT * n, 4096)
+        cap = max(min(GRID_MAX_CELLS_PER_POINT * n, GRID_MAX_CELLS), 4096)
         while True:
             dims = np.maximum(np.ceil(extent / h), 1).astype(np.int64)
             if int(np.prod(dims)) <= cap:

@@ -65,3 +65,13 @@ def test_grid_single_point_and_one_position():
     same = np.full((20, 3), 0.5, np.float32)  # zero extent, zero spacing
     idx, d = nb.GridKNN(same).search(same[:3], 4)
     assert (d == 0).all() and all(len(set(r)) == 4 for r in idx)
+
+
+def test_grid_with_few_cells_is_still_exact(monkeypatch):
+    """A cell budget far below the cloud's need (coarse cells of many points) changes the speed, not the answer."""
+    monkeypatch.setattr(nb, "GRID_MAX_CELLS", 10)
+    src = _clouds()["surface"].astype(np.float32)
+    grid = nb.GridKNN(src, 3)
+    assert int(np.prod(grid._dims)) <= 4096
+    _, d = grid.search(src[:200], 3)
+    np.testing.assert_allclose(d, _brute(src.astype(np.float64), src[:200].astype(np.float64), 3), rtol=1e-5, atol=1e-6)
