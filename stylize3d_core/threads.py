@@ -1,9 +1,9 @@
 """A small shared thread pool for work that releases the GIL: the compiled rasterizer's passes
 (``render/rasterize_fast.py``: contiguous parts of a range, one per thread), the colour transfer's
-chunks (``models/colour_transfer.py``), the k-NN grid's queries (``points/neighbours.py``) and the 3-NN
-upsampling's weighted sums (``points/interpolate.py``). Jobs on it call Numba, numpy or OpenCV, not
-PyTorch: a PyTorch call gives its thread an OpenMP team of its own, which slowed the main thread's
-later parallel regions (see ``points/interpolate.py``)."""
+chunks (``models/colour_transfer.py``) and the k-NN grid's queries (``points/neighbours.py``). Jobs on
+it call Numba, numpy or OpenCV, not PyTorch: a PyTorch call gives its thread an OpenMP team of its own,
+and with more OpenMP threads than cores libgomp stops spinning between parallel regions (``embedding_bag``
+calls on the pool made every later 256 px preview 1-3 ms slower, 30.2 -> 33.6 ms measured side by side)."""
 
 from __future__ import annotations
 

@@ -8,7 +8,7 @@ style CNN loaded beforehand (not counted):
 * first frame: photo file + style image -> the first stylized 512-pixel frame in a process that has
   paid its once-per-process costs, as the viewer has when a photo is opened (timed apart:
   ``pipeline.warm_up``, which the viewer runs at start: the depth modules' imports, the FPS worker
-  process, the Numba kernels of the k-NN grid, the upsampling and the rasterizer): read, prior depth, LDI, points, with
+  process, the Numba kernels of the k-NN grid and the rasterizer): read, prior depth, LDI, points, with
   the style CNN in a worker thread meanwhile (``pipeline.prefetch_style``, as ``stylize3d render``
   does), then geometry, encoding, AdaAttN, upsampling, rasterization, decode; in seconds of wall
   time and of the process's CPU time (all threads; steadier on a shared machine);

@@ -19,15 +19,11 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import functools
-
-import numpy as np
 import torch
 import torch.nn.functional as F
 
 from ..checks import check_finite, check_shape
 from ..errors import InputError
-from .. import threads as _threads
 from .neighbours import KNNResult, knn
 
 IDW_EPS = 1e-8
@@ -104,9 +100,7 @@ def interpolate(features: torch.Tensor, idx: torch.Tensor, weight: torch.Tensor)
     accumulates the k neighbours in column order into each output row, as a loop of
     ``index_select`` + ``addcmul`` would (bit-identical on the 1 MP sample's 1.7M
     points), 3-4x faster, with no (N, K, C) tensor. In bfloat16 it accumulates in
-    float32 and rounds once (the loop rounded after every neighbour). At inference (no
-    gradient, float32, 65k taps or more) the same sum runs in a Numba kernel on the pool's
-    threads (:func:`_weighted_rows_parallel`; equal to float32 rounding).
+    float32 and rounds once (the loop rounded after every neighbour).
 
     Args:
         features: (M, C) features of the sparse points.
@@ -126,52 +120,4 @@ def interpolate(features: torch.Tensor, idx: torch.Tensor, weight: torch.Tensor)
         raise InputError("idx", f"indices must lie in [0, {features.shape[0]}), got [{lo}, {hi}]")
     check_finite(weight, "weight")
     w = weight.to(features.dtype)  # (N, K)
-    if _parallel_applies(idx, features, w):
-        return _weighted_rows_parallel(idx, features, w)
     return F.embedding_bag(idx, features, mode="sum", per_sample_weights=w)  # (N, C)
-
-
-PARALLEL_MIN_TAPS = 1 << 16
-"""From this many (index, weight) taps, inference sums on the pool's threads (:func:`_weighted_rows_parallel`)."""
-
-
-@functools.lru_cache(maxsize=None)
-def _kernels():
-    """The compiled weighted sum (None where Numba is missing or fails to import)."""
-    try:
-        from . import _interp_kernels as k
-    except Exception:  # noqa: BLE001 (any failure to import means: embedding_bag in one thread)
-        return None
-    return k
-
-
-def warm_up() -> None:
-    """Load the inference kernel (Numba's cache) with a sum of one row (``pipeline.warm_up``)."""
-    k = _kernels()
-    if k is not None:
-        k.weighted_rows(np.zeros((1, 1), np.int64), np.ones((1, 1), np.float32), np.ones((1, 1), np.float32),
-                        np.empty((1, 1), np.float32), 0, 1)
-
-
-def _parallel_applies(idx: torch.Tensor, features: torch.Tensor, w: torch.Tensor) -> bool:
-    grad = torch.is_grad_enabled() and (features.requires_grad or w.requires_grad)
-    return (not grad and idx.numel() >= PARALLEL_MIN_TAPS and features.dtype == torch.float32
-            and features.device.type == "cpu" and _threads.threads() > 1 and _kernels() is not None)
-
-
-def _weighted_rows_parallel(idx: torch.Tensor, features: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
-    """The weighted sum of :func:`interpolate` in a Numba kernel, its rows split over the pool's threads.
-
-    PyTorch's CPU ``embedding_bag`` runs on one thread (1.7M rows of 3 neighbours of 35 channels: 0.47 s on
-    this 2-core machine; here 0.1-0.2 s). The kernel adds the neighbours in the same order in float32; the
-    result differs from ``embedding_bag``'s by float32 rounding only (its vectorised products may fuse).
-    Numba, not PyTorch, in the pool's threads: a PyTorch call from another thread gives that thread an
-    OpenMP team of its own, and with more OpenMP threads than cores libgomp stops spinning between parallel
-    regions, which made every later frame's decoder ~1-3 ms slower (measured on the 256 px preview)."""
-    k = _kernels()
-    n, c = idx.shape[0], features.shape[1]
-    out = torch.empty(n, c, dtype=torch.float32)
-    args = (np.ascontiguousarray(idx.numpy()), np.ascontiguousarray(w.numpy()),
-            np.ascontiguousarray(features.detach().numpy()), out.numpy())
-    _threads.run_parts([(k.weighted_rows, args + (a, b)) for a, b in _threads.parts(n, _threads.threads()) if b > a])
-    return out

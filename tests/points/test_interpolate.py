@@ -146,31 +146,3 @@ def test_interpolate_equals_the_column_loop_bit_for_bit():
     assert torch.equal(interpolate(feats, nn3.idx, nn3.weight), loop)
     assert interpolate(feats, nn3.idx[:0], nn3.weight[:0]).shape == (0, 19)
 
-
-def test_interpolate_at_inference_on_threads_matches_embedding_bag(monkeypatch):
-    """The inference path (a Numba kernel on the pool's threads) gives embedding_bag's weighted sums to
-    float32 rounding, on three parts the last one short; with gradients it stays embedding_bag."""
-    import torch.nn.functional as F
-
-    import importlib
-
-    ip = importlib.import_module("stylize3d_core.points.interpolate")  # the package exports a function of that name
-    from stylize3d_core import threads
-
-    if ip._kernels() is None:
-        pytest.skip("Numba does not import")
-    monkeypatch.setattr(ip, "PARALLEL_MIN_TAPS", 1)
-    monkeypatch.setattr(threads, "threads", lambda: 3)
-    g = torch.Generator().manual_seed(1)
-    table = torch.randn(500, 7, generator=g)
-    idx = torch.randint(0, 500, (10_001, 3), generator=g)
-    w = torch.rand(10_001, 3, generator=g)
-    ref = F.embedding_bag(idx, table, mode="sum", per_sample_weights=w)
-    with torch.inference_mode():
-        assert ip._parallel_applies(idx, table, w)
-        out = ip.interpolate(table, idx, w)
-    torch.testing.assert_close(out, ref, rtol=1e-6, atol=1e-6)
-    t = table.clone().requires_grad_(True)
-    assert not ip._parallel_applies(idx, t, w)  # training: embedding_bag and its backward
-    ip.interpolate(t, idx, w).sum().backward()
-    assert t.grad is not None and torch.isfinite(t.grad).all()
