@@ -266,9 +266,10 @@ def _load_photo3d(spec: PhotoSpec, log: Log) -> Tuple[Photo3D, Tuple[int, int]]:
 def warm_up(wait: bool = False) -> float:
     """Pay the once-per-process costs of the first photo ahead of it: import the depth sources (OpenCV's
     contrib modules, onnxruntime's loader), start the farthest-point-sampling worker process and load the
-    k-NN grid's and the rasterizer's compiled kernels (Numba). Each would otherwise run
-    beside, and slow, the first photo's depth, LDI and geometry: the viewer calls this at start, while its window opens. ``wait``: return
-    when all of it is done (the benchmarks time a photo after it). Returns the seconds it took."""
+    k-NN grid's and the rasterizer's compiled kernels (Numba). Each would otherwise run beside, and slow,
+    the first photo's depth, LDI and geometry: the viewer calls this at start, while its window opens.
+    ``wait``: return when all of it is done (the benchmarks time a photo after it). Returns the seconds
+    it took."""
     from .points.sampling import wait_for_fps_process
     from .render.rasterize_fast import wait_warm, warm_up_async
 

@@ -107,14 +107,11 @@ class StylizeSettings:
     preview_border_margin: int = 4
 
     def __post_init__(self) -> None:
-        for name in ("border_margin", "preview_border_margin"):
+        for name, lo, hi, unit in (("border_margin", 0, 64, " (pixels)"), ("preview_border_margin", 0, 64, " (pixels)"),
+                                   ("decode_scale", 1, 8, ""), ("preview_decode_scale", 1, 8, "")):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 64:
-                raise InputError(name, f"must be an integer from 0 to 64 (pixels), got {value!r}")
-        for name in ("decode_scale", "preview_decode_scale"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 8:
-                raise InputError(name, f"must be an integer from 1 to 8, got {value!r}")
+            if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+                raise InputError(name, f"must be an integer from {lo} to {hi}{unit}, got {value!r}")
         check_range(self.strength, "strength", 0.0, 1.0)
         if self.supersample not in (1, 2):
             raise InputError("supersample", f"must be 1 or 2, got {self.supersample!r}")

@@ -44,7 +44,7 @@ def test_prefetch_reraises_the_workers_error():
 
 def test_warm_up_waits_for_the_fps_worker_and_the_kernels():
     """``warm_up(wait=True)`` returns with the FPS worker process answering and the rasterizer's kernels
-    loaded; a second call finds everything running and returns at once."""
+    loaded; a second call finds everything running and starts nothing new."""
     from stylize3d_core.pipeline import warm_up
     from stylize3d_core.points import sampling
     from stylize3d_core.render import rasterize_fast
@@ -54,4 +54,6 @@ def test_warm_up_waits_for_the_fps_worker_and_the_kernels():
     if sampling._WORKER.enabled:
         assert sampling._WORKER._ready and sampling._WORKER._proc.poll() is None
     assert rasterize_fast._WARM is not None and not rasterize_fast._WARM.is_alive()
-    assert warm_up(wait=True) < 1.0
+    proc, thread = sampling._WORKER._proc, rasterize_fast._WARM
+    warm_up(wait=True)
+    assert sampling._WORKER._proc is proc and rasterize_fast._WARM is thread  # the same process, no new warm-up

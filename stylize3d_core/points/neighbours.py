@@ -38,6 +38,7 @@ from typing import NamedTuple, Optional, Tuple
 import numpy as np
 import torch
 
+from .. import threads as _threads
 from ..checks import check_finite, check_range, check_shape
 from ..errors import InputError
 
@@ -139,7 +140,6 @@ class GridKNN:
     def __init__(self, source: np.ndarray, k: int = 8) -> None:
         g = _grid_kernels()
         self._g = g
-        self._src = source
         n = source.shape[0]
         lo = source.min(axis=0).astype(np.float32)
         extent = (source.max(axis=0) - lo).astype(np.float64)
@@ -162,8 +162,6 @@ class GridKNN:
 
     def search(self, qry: np.ndarray, k: int) -> Tuple[np.ndarray, np.ndarray]:
         """(M, k) int64 indices and (M, k) float32 squared distances of the k <= N nearest source points."""
-        from .. import threads as _threads
-
         m = qry.shape[0]
         idx = np.empty((m, k), np.int64)
         d = np.empty((m, k), np.float32)

@@ -40,6 +40,7 @@ from __future__ import annotations
 import atexit
 import math
 import os
+import select
 import struct
 import subprocess
 import sys
@@ -100,18 +101,23 @@ class _Worker:
         with self._lock:
             try:
                 self._spawn()
-                if not self._ready:
-                    import select
-
-                    readable, _, _ = select.select([self._proc.stdout], [], [], timeout)
-                    if not readable:
-                        return False
-                    if self._read(1) != b"R":
-                        raise EOFError("the worker process did not start")
-                    self._ready = True
+                return self._await_ready(timeout)
             except (OSError, EOFError, ValueError):
                 self._stop()
                 return False
+
+    def _await_ready(self, timeout: Optional[float] = None) -> bool:
+        """Read the worker's ready byte unless read already (lock held): False if none came within
+        ``timeout`` seconds (None: wait); EOFError if the process answered anything else or ended."""
+        if self._ready:
+            return True
+        if timeout is not None:
+            readable, _, _ = select.select([self._proc.stdout], [], [], timeout)
+            if not readable:
+                return False
+        if self._read(1) != b"R":
+            raise EOFError("the worker process did not start")
+        self._ready = True
         return True
 
     def _write(self, view: memoryview) -> None:
@@ -132,10 +138,7 @@ class _Worker:
         with self._lock:
             try:
                 self._spawn()
-                if not self._ready:
-                    if self._read(1) != b"R":
-                        raise EOFError("the worker process did not start")
-                    self._ready = True
+                self._await_ready()
                 self._write(memoryview(struct.pack("<4q", pts.shape[0], n_samples, height, start)))
                 self._write(memoryview(np.ascontiguousarray(pts)).cast("B"))
                 status, n_bytes = struct.unpack("<2q", self._read(16))
