@@ -85,7 +85,13 @@ def run(argv: Optional[List[str]] = None) -> int:
     warnings.showwarning = show_warning
     try:
         install_signal_handlers()  # in the try: a signal may land while it imports the commit check
-        from app.cli import main  # lazy: imports torch
+        try:
+            from app.cli import main  # lazy: imports torch
+        except Exception:
+            # a signal that lands inside a C extension's own import (numpy importing datetime) comes out
+            # as that extension's ImportError: it is the interruption, not a broken install
+            raise_if_interrupted()
+            raise
 
         return main(argv)
     except KeyboardInterrupt as e:  # while importing, or outside main's own handling

@@ -355,3 +355,26 @@ def test_warnings_while_importing_are_one_line_too(capsys, monkeypatch):
     monkeypatch.setattr(app.cli, "main", warn_then_fail)
     assert entry.run([]) == 0
     assert capsys.readouterr().err == "stylize3d: warning: something odd in two lines\n"
+
+
+def test_a_signal_inside_a_c_extensions_import_is_the_interruption(capsys, monkeypatch):
+    """Found by test_signal_during_start_up (about one run in three): SIGTERM landed while numpy's C
+    extension imported datetime, and numpy turned the interruption into an ImportError with a traceback."""
+    import sys
+    import types
+
+    class Importing(types.ModuleType):  # ``from app.cli import main`` as numpy's import failed then
+        def __getattr__(self, name):
+            entry._received.append(int(signal.SIGTERM))
+            raise ImportError('PyCapsule_Import could not import module "datetime"')
+
+    monkeypatch.setattr(entry, "install_signal_handlers", lambda: None)  # keep pytest's own handlers
+    monkeypatch.setitem(sys.modules, "app.cli", Importing("app.cli"))
+    try:
+        assert entry.run([]) == 143
+    finally:
+        entry._received.clear()
+    assert capsys.readouterr().err == "stylize3d: terminated (SIGTERM); nothing was written\n"
+    monkeypatch.setitem(sys.modules, "app.cli", types.ModuleType("app.cli"))  # no signal: the real error
+    with pytest.raises(ImportError):
+        entry.run([])
