@@ -1,12 +1,15 @@
 """A small shared thread pool for work that releases the GIL: the compiled rasterizer's passes
 (``render/rasterize_fast.py``: contiguous parts of a range, one per thread), the colour transfer's
-chunks (``models/colour_transfer.py``) and the k-NN grid's queries (``points/neighbours.py``). Jobs on
+chunks (``models/colour_transfer.py``), the k-NN grid's queries (``points/neighbours.py``) and the IDW
+weights (``points/interpolate.py``). Jobs on
 it call Numba, numpy or OpenCV, not PyTorch: a PyTorch call gives its thread an OpenMP team of its own,
 and with more OpenMP threads than cores libgomp stops spinning between parallel regions (``embedding_bag``
 calls on the pool made every later 256 px preview 1-3 ms slower, 30.2 -> 33.6 ms measured side by side)."""
 
 from __future__ import annotations
 
+import functools
+import importlib
 import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
@@ -27,6 +30,16 @@ def pool() -> ThreadPoolExecutor:
         if _POOL is None:
             _POOL = ThreadPoolExecutor(THREADS, thread_name_prefix="stylize3d-kernel")
         return _POOL
+
+
+@functools.lru_cache(maxsize=None)
+def compiled(module: str):
+    """The module of compiled (Numba) kernels named ``module`` (absolute: ``stylize3d_core.render._raster_kernels``),
+    imported once; None where Numba is missing or the import fails (the caller's numpy or Open3D path then)."""
+    try:
+        return importlib.import_module(module)
+    except Exception:  # noqa: BLE001 (any failure to import means: no compiled path)
+        return None
 
 
 def threads() -> int:

@@ -111,7 +111,24 @@ def _linear_rgb(lab: np.ndarray) -> np.ndarray:
     return out
 
 
-def gamut_map(lab: np.ndarray, steps: int = 8) -> np.ndarray:
+_GAMUT_STEPS = 8
+"""Bisection steps of :func:`gamut_map` (the chroma scale to 1/256)."""
+
+
+def _kernels():
+    """The compiled colour map (None where Numba is missing: the numpy lines then, the same colours)."""
+    return _threads.compiled(__package__ + "._colour_kernels")
+
+
+def warm_up() -> None:
+    """Load the compiled colour map (Numba's cache) with one colour, so a photo's first frame does not wait."""
+    k = _kernels()
+    if k is not None:
+        one = np.zeros((1, 3), np.float32)
+        k.transfer(one, one[0], np.ones(3, np.float32), one[0], _LAB_WHITE, _XYZ_TO_LINEAR, 1, 0, 1, one.copy())
+
+
+def gamut_map(lab: np.ndarray, steps: int = _GAMUT_STEPS) -> np.ndarray:
     """Bring L*a*b* colours (n, 3) into the sRGB gamut by reducing their chroma (a*, b*) only, keeping L*.
 
     A transferred highlight or shadow can ask for a chroma that no sRGB colour has at
@@ -148,6 +165,9 @@ class ColourTransfer:
     Their L*a*b* values and statistics are computed once; each call then costs
     one affine map and one conversion back to sRGB.
     """
+
+    compiled = True
+    """Map with the compiled kernel where Numba imports (False: the numpy reference; the same colours)."""
 
     def __init__(self, rgb: torch.Tensor) -> None:
         self.rgb = rgb.detach().float().clamp(0.0, 1.0)
@@ -193,12 +213,20 @@ class ColourTransfer:
         n = self._lab.shape[0]
         back = np.empty((n, 3), np.float32)
 
+        kernels = _kernels() if self.compiled else None
+        mean32 = np.asarray(c.mean, np.float32)
+
         def part(a: int) -> None:  # each colour's own map: chunks give the same colours, in cache, on both cores
             lab = self._lab[a:a + _CHUNK]
-            out = (lab - c.mean) * gain32 + target32
-            out[:, 0] = out[:, 0].clip(0.0, 100.0)
-            out[:, 1:] = out[:, 1:].clip(-127.0, 127.0)
-            out = gamut_map(out)
+            if kernels is not None:  # one pass per colour, the same bits as the numpy lines below
+                out = np.empty_like(lab)
+                kernels.transfer(lab, mean32, gain32, target32, _LAB_WHITE, _XYZ_TO_LINEAR, _GAMUT_STEPS,
+                                 0, lab.shape[0], out)
+            else:
+                out = (lab - c.mean) * gain32 + target32
+                out[:, 0] = out[:, 0].clip(0.0, 100.0)
+                out[:, 1:] = out[:, 1:].clip(-127.0, 127.0)
+                out = gamut_map(out, _GAMUT_STEPS)
             rgb = cv2.cvtColor(out.astype(np.float32).reshape(-1, 1, 3), cv2.COLOR_Lab2RGB).reshape(-1, 3)
             back[a:a + _CHUNK] = np.nan_to_num(rgb, nan=0.0).clip(0.0, 1.0)
 
@@ -215,4 +243,4 @@ def transfer_colours(rgb: torch.Tensor, style: LabStats, strength: float = 1.0) 
     return ColourTransfer(rgb)(style, strength)
 
 
-__all__ = ["ColourTransfer", "LabStats", "gamut_map", "MAX_GAIN", "lab_stats", "mix_stats", "transfer_colours"]
+__all__ = ["ColourTransfer", "LabStats", "gamut_map", "MAX_GAIN", "lab_stats", "mix_stats", "transfer_colours", "warm_up"]

@@ -42,14 +42,9 @@ from .. import threads as _threads
 from ..errors import RenderInterrupted
 
 
-@functools.lru_cache(maxsize=None)
 def _kernels():
     """The compiled kernels (None where Numba is missing or fails to import)."""
-    try:
-        from . import _raster_kernels as k
-    except Exception:  # noqa: BLE001 (any failure to import means: no compiled path)
-        return None
-    return k
+    return _threads.compiled(__package__ + "._raster_kernels")
 
 
 _WARM: Optional[threading.Thread] = None

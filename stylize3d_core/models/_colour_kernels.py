@@ -1,0 +1,68 @@
+"""Numba kernel of :class:`~stylize3d_core.models.colour_transfer.ColourTransfer` (imported where Numba imports).
+
+One pass per colour: the affine L*a*b* map, the clip, and the gamut mapping's bisection of the chroma
+scale, in float32 with the operations of the numpy reference (``colour_transfer._linear_rgb`` and
+``gamut_map``) in the same order, so the two give the same bits. The numpy reference makes a dozen
+temporaries of every chunk and runs its bisection on the out-of-gamut colours as separate array passes;
+on the 1.7M points of a 1 MP photo with a bright style it took ~0.2 s of the first frame on two cores.
+"""
+
+import numba
+import numpy as np
+
+jit = numba.njit(cache=True, nogil=True)
+
+_F32 = np.float32
+_D = _F32(6.0 / 29.0)
+_LOW_SLOPE = _F32(3.0 * (6.0 / 29.0) * (6.0 / 29.0))
+_LOW_OFFSET = _F32(4.0 / 29.0)
+_LO = _F32(-1e-4)
+_HI = _F32(1.0 + 1e-4)
+
+
+@jit
+def _cube_or_linear(f):
+    if f <= _D:
+        return _LOW_SLOPE * (f - _LOW_OFFSET)
+    return f * f * f
+
+
+@jit
+def in_gamut(L, a, b, white, m):
+    """Whether L*a*b* (L, a, b) is an sRGB colour: linear sRGB within [-1e-4, 1 + 1e-4] (``gamut_map``'s test)."""
+    fy = (L + _F32(16.0)) / _F32(116.0)
+    x = _cube_or_linear(fy + a / _F32(500.0)) * white[0]
+    y = _cube_or_linear(fy) * white[1]
+    z = _cube_or_linear(fy - b / _F32(200.0)) * white[2]
+    for i in range(3):
+        v = x * m[i, 0] + y * m[i, 1] + z * m[i, 2]
+        if v < _LO or v > _HI:
+            return False
+    return True
+
+
+@jit
+def transfer(lab, mean, gain, target, white, m, steps, a0, a1, out):
+    """Rows a0..a1-1: ``(lab - mean) * gain + target``, L* clipped to [0, 100] and a*, b* to [-127, 127],
+    then outside the sRGB gamut the chroma scaled by the largest of ``steps`` bisection steps that fits."""
+    for r in range(a0, a1):
+        L = (lab[r, 0] - mean[0]) * gain[0] + target[0]
+        a = (lab[r, 1] - mean[1]) * gain[1] + target[1]
+        b = (lab[r, 2] - mean[2]) * gain[2] + target[2]
+        L = min(max(L, _F32(0.0)), _F32(100.0))
+        a = min(max(a, _F32(-127.0)), _F32(127.0))
+        b = min(max(b, _F32(-127.0)), _F32(127.0))
+        if not in_gamut(L, a, b, white, m):
+            lo = _F32(0.0)
+            hi = _F32(1.0)
+            for _ in range(steps):
+                mid = (lo + hi) / _F32(2.0)
+                if in_gamut(L, a * mid, b * mid, white, m):
+                    lo = mid
+                else:
+                    hi = mid
+            a = a * lo
+            b = b * lo
+        out[r, 0] = L
+        out[r, 1] = a
+        out[r, 2] = b
