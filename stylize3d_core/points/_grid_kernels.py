@@ -1,4 +1,5 @@
-"""Numba kernels of :class:`~stylize3d_core.points.neighbours.GridKNN` (imported where Numba imports).
+"""Numba kernels of :class:`~stylize3d_core.points.neighbours.GridKNN` and of the IDW weights
+(:func:`~stylize3d_core.points.interpolate.idw_from_knn`), imported where Numba imports.
 
 A uniform grid over the points' bounding box, its cells in CSR form (the points sorted by cell), and an
 exact k-nearest-neighbour search that visits the cells in shells of growing Chebyshev distance around
@@ -135,3 +136,27 @@ def nn_distance_sample(src, sample):
                 best = d
         out[s] = best
     return out
+
+
+@jit
+def idw_rows(sq_dist, eps, a0, a1, out):
+    """Rows a0..a1-1 of the IDW weights (``interpolate.idw_from_knn``) from squared distances (N, k) float32,
+    the same bits as its torch lines: in float64, ``d = sqrt(max(d2, 0))``, ``w = 1 / (d + eps)`` divided by
+    its row sum (summed left to right), one-hot on the first column where ``d[0] < eps``; stored as float32.
+    Returns False (rows left unfinished) at a non-finite distance: the caller's checked path then says so."""
+    k = sq_dist.shape[1]
+    for r in range(a0, a1):
+        for j in range(k):
+            if not (np.float64(sq_dist[r, j]) < np.inf):  # NaN or inf
+                return False
+        if np.sqrt(max(np.float64(sq_dist[r, 0]), 0.0)) < eps:
+            out[r, 0] = 1.0
+            for j in range(1, k):
+                out[r, j] = 0.0
+            continue
+        total = 0.0
+        for j in range(k):
+            total += 1.0 / (np.sqrt(max(np.float64(sq_dist[r, j]), 0.0)) + eps)
+        for j in range(k):
+            out[r, j] = np.float32((1.0 / (np.sqrt(max(np.float64(sq_dist[r, j]), 0.0)) + eps)) / total)
+    return True

@@ -31,7 +31,6 @@ float32.
 
 from __future__ import annotations
 
-import functools
 import math
 from typing import NamedTuple, Optional, Tuple
 
@@ -91,14 +90,9 @@ QUERY_CHUNK_RESULTS = 1 << 19
 """Neighbours (queries x k) found per call of Open3D's search (:meth:`KNNIndex.knn`): ~50-100 ms each."""
 
 
-@functools.lru_cache(maxsize=None)
 def _grid_kernels():
     """The compiled grid search (None where Numba is missing or fails to import: Open3D's k-d tree then)."""
-    try:
-        from . import _grid_kernels as g
-    except Exception:  # noqa: BLE001 (any failure to import means: no compiled search)
-        return None
-    return g
+    return _threads.compiled(__package__ + "._grid_kernels")
 
 
 BACKENDS = ("grid", "open3d")
@@ -178,6 +172,7 @@ def warm_up() -> None:
     if BACKEND == "grid" and _grid_kernels() is not None:
         pts = np.eye(4, 3, dtype=np.float32)
         GridKNN(pts, 2).search(pts, 2)
+        _grid_kernels().idw_rows(pts, 1e-8, 0, 1, np.empty_like(pts))  # interpolate's IDW weights
 
 
 class KNNIndex:

@@ -146,3 +146,32 @@ def test_interpolate_equals_the_column_loop_bit_for_bit():
     assert torch.equal(interpolate(feats, nn3.idx, nn3.weight), loop)
     assert interpolate(feats, nn3.idx[:0], nn3.weight[:0]).shape == (0, 19)
 
+
+
+def test_compiled_weights_match_the_torch_lines_bit_for_bit(monkeypatch):
+    """idw_from_knn's weights from the points' compiled kernel against its torch lines: random distances,
+    coincident and nearly coincident first neighbours, tiny negative squared distances (clamped), and a
+    NaN that must still be reported by the checked path."""
+    import importlib
+
+    from stylize3d_core.points.neighbours import KNNResult
+
+    interp = importlib.import_module("stylize3d_core.points.interpolate")
+    if interp._threads.compiled("stylize3d_core.points._grid_kernels") is None:
+        pytest.skip("Numba does not import here: only the torch lines run")
+    n = 200_003  # several parts on the pool's threads
+    sq = (rand((n, 3), 4) ** 4 * 1e-3).sort(dim=1).values
+    sq[:100, 0] = 0.0
+    sq[100:200, 0] = 1e-17  # sqrt below IDW_EPS: one-hot
+    sq[200:300] = -1e-9
+    sq[300:310, 1] = 5e-17
+    res = KNNResult(torch.zeros(n, 3, dtype=torch.long), sq)
+    fast = interp.idw_from_knn(res, 100).weight
+    assert fast.dtype == torch.float32 and fast[:200].tolist() == [[1.0, 0.0, 0.0]] * 200
+    monkeypatch.setattr(interp, "_compiled_weights", lambda sq_dist: None)
+    assert torch.equal(fast, interp.idw_from_knn(res, 100).weight)
+    monkeypatch.undo()
+    bad = sq.clone()
+    bad[n - 1, 2] = float("nan")
+    with pytest.raises(InputError, match="NaN"):
+        interp.idw_from_knn(KNNResult(res.idx, bad), 100)
