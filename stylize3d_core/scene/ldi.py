@@ -71,6 +71,7 @@ Coordinates: canvas pixel ``(i, j)`` is photo pixel ``(i - pad, j - pad)``.
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 
 from dataclasses import dataclass, field
 from typing import Literal, NamedTuple, Optional, Tuple, Union
@@ -325,10 +326,14 @@ def build_ldi(
         nd = cross_median(nd)
     nd, fg, bg = _tear(nd, settings)
     cover = _coverage(nd, fg, settings, fov)
-    hidden = _hidden_layer(image, nd, fg, bg, cover.widths, settings) if cover.widths.any() else None
-
     pad = cover.pad
-    rgb0, nd0 = _extend_border(image, nd, pad)
+    # the border (its push-pull fills) and the hidden layer behind the photo's edges do not depend on each
+    # other: the border runs in a thread of its own beside the hidden layer (OpenCV and numpy free the GIL
+    # on whole images; a thread of its own, not the shared pool, whose jobs must never wait on each other)
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="stylize3d-ldi-border") as side:
+        border = side.submit(_border, image, nd, fg, pad, settings)
+        hidden = _hidden_layer(image, nd, fg, bg, cover.widths, settings) if cover.widths.any() else None
+        rgb0, nd0, outer = border.result()
     hc, wc = h + 2 * pad, w + 2 * pad
     inner = (slice(pad, pad + h), slice(pad, pad + w))
     label = np.full((hc, wc), BORDER, np.uint8)
@@ -341,8 +346,11 @@ def build_ldi(
         hidden_mask[inner] = mask1
         hidden_rgb[inner][mask1] = rgb1[mask1]
         hidden_depth[inner][mask1] = NEAR_DEPTH / nd1[mask1]
-    if pad > 0 and settings.border_hidden and _edges_near_frame(fg, pad):
-        _border_hidden(image, nd, nd0, pad, settings, hidden_mask, hidden_rgb, hidden_depth)
+    if outer is not None:  # the border's hidden samples: outside the photo, where the layer above put none
+        add, add_rgb, add_depth = outer
+        hidden_mask |= add
+        hidden_rgb[add] = add_rgb
+        hidden_depth[add] = add_depth
     fg_c = np.zeros((hc, wc), bool)
     bg_c = np.zeros((hc, wc), bool)
     fg_c[inner], bg_c[inner] = fg, bg
@@ -754,11 +762,24 @@ def _edges_near_frame(fg: np.ndarray, pad: int) -> bool:
     return bool(fg[:k].any() or fg[-k:].any() or fg[:, :k].any() or fg[:, -k:].any())
 
 
+def _border(
+    rgb: np.ndarray, nd: np.ndarray, fg: np.ndarray, pad: int, s: LDISettings,
+) -> Tuple[np.ndarray, np.ndarray, Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]]]:
+    """The canvas's colour and disparity with a border of ``pad`` (:func:`_extend_border`) and the border's
+    hidden samples (:func:`_border_hidden`: mask (Hc, Wc), their colours (n, 3) and depths (n,); None
+    where it has none)."""
+    rgb0, nd0 = _extend_border(rgb, nd, pad)
+    outer = None
+    if pad > 0 and s.border_hidden and _edges_near_frame(fg, pad):
+        outer = _border_hidden(rgb, nd, nd0, pad, s)
+    return rgb0, nd0, outer
+
+
 def _border_hidden(
     rgb: np.ndarray, nd: np.ndarray, nd0: np.ndarray, pad: int, s: LDISettings,
-    hidden_mask: np.ndarray, hidden_rgb: np.ndarray, hidden_depth: np.ndarray,
-) -> None:
-    """Hidden background in the border, behind foreground that the frame's edge cuts (in place).
+) -> Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Hidden background in the border, behind foreground that the frame's edge cuts: the mask (Hc, Wc) of
+    the border pixels that get a hidden sample, their colours (n, 3) and depths (n,); None if none do.
 
     The border's layer 0 continues whatever reaches the frame's edge, a tower cut by it
     too; a camera that looks past the edge then sees the tower's continuation with
@@ -772,7 +793,7 @@ def _border_hidden(
     far = cv2.erode(nd, np.ones((k, k), np.uint8), borderType=cv2.BORDER_REPLICATE)
     background = (nd - far <= s.disparity_jump).astype(np.float32)  # (H, W)
     if background.all():
-        return  # nothing in front of anything: the border's layer 0 is background already
+        return None  # nothing in front of anything: the border's layer 0 is background already
     values = np.zeros((h + 2 * pad, w + 2 * pad, 4), np.float32)
     weight = np.zeros((h + 2 * pad, w + 2 * pad), np.float32)
     inner = (slice(pad, pad + h), slice(pad, pad + w))
@@ -782,9 +803,7 @@ def _border_hidden(
     outside = np.ones(nd0.shape, bool)
     outside[inner] = False
     add = outside & (nd0 - filled[..., 3] > s.disparity_jump) & (filled[..., 3] > 0)
-    hidden_mask |= add
-    hidden_rgb[add] = np.clip(filled[..., :3][add], 0.0, 1.0)
-    hidden_depth[add] = NEAR_DEPTH / filled[..., 3][add]
+    return add, np.clip(filled[..., :3][add], 0.0, 1.0), NEAR_DEPTH / filled[..., 3][add]
 
 
 def _extend_border(rgb: np.ndarray, nd: np.ndarray, pad: int) -> Tuple[np.ndarray, np.ndarray]:
