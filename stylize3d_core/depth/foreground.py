@@ -9,6 +9,7 @@ resolution.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from typing import Tuple
 
 import cv2
@@ -230,20 +231,38 @@ def snap_mask_to_edges(soft: np.ndarray, photo: np.ndarray, radius: int, sigma_c
     if ys.size == 0:
         return mask
     h, w = mask.shape
-    centre = photo[ys, xs]  # (M, 3)
     step = max(1, radius // 4)
-    vote = np.zeros(ys.size, np.float32)
-    total = np.zeros(ys.size, np.float32)
     inv_c = -0.5 / sigma_color**2
     inv_s = -0.5 / float(radius) ** 2  # wide: the whole same-coloured part of the window votes
-    for dy in range(-radius, radius + 1, step):
-        yy = np.clip(ys + dy, 0, h - 1)
-        for dx in range(-radius, radius + 1, step):
-            xx = np.clip(xs + dx, 0, w - 1)
-            diff = photo[yy, xx] - centre  # (M, 3)
-            wgt = np.exp(inv_c * np.einsum("ij,ij->i", diff, diff) + inv_s * (dx * dx + dy * dy))
-            vote += wgt * soft[yy, xx]
-            total += wgt
     out = mask.copy()
-    out[ys, xs] = vote > 0.5 * total
+
+    def part(a: int, b: int) -> None:  # the band's pixels a..b-1 (each pixel's vote is its own)
+        y, x = ys[a:b], xs[a:b]
+        centre = photo[y, x]  # (m, 3)
+        vote = np.zeros(y.size, np.float32)
+        total = np.zeros(y.size, np.float32)
+        for dy in range(-radius, radius + 1, step):
+            yy = np.clip(y + dy, 0, h - 1)
+            for dx in range(-radius, radius + 1, step):
+                xx = np.clip(x + dx, 0, w - 1)
+                diff = photo[yy, xx] - centre  # (m, 3)
+                wgt = np.exp(inv_c * np.einsum("ij,ij->i", diff, diff) + inv_s * (dx * dx + dy * dy))
+                vote += wgt * soft[yy, xx]
+                total += wgt
+        out[y, x] = vote > 0.5 * total
+
+    # halves of a large band in two threads (numpy frees the GIL on arrays this large: a 1 MP photo's
+    # 0.12 s -> ~0.07 s); a thread of its own, not the shared pool, so a pool job may call this
+    n = ys.size
+    if n < _SPLIT_BAND_PX:
+        part(0, n)
+    else:
+        with ThreadPoolExecutor(max_workers=1, thread_name_prefix="stylize3d-snap") as side:
+            half = side.submit(part, n // 2, n)
+            part(0, n // 2)
+            half.result()
     return out
+
+
+_SPLIT_BAND_PX = 1 << 15
+"""Band pixels from which :func:`snap_mask_to_edges` works in two threads."""

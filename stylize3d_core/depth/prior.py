@@ -49,6 +49,7 @@ contact sheet ``docs/depth_contact_sheet.png`` shows it on the bundled samples.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import NamedTuple, Optional
 
@@ -258,6 +259,11 @@ def estimate_prior(rgb: np.ndarray, settings: PriorSettings = PriorSettings()) -
     background = np.clip(background, 0.02, 1.0)
     background[sky] = 0.0
     background = cv2.GaussianBlur(background, (0, 0), max(h, w) / 100)
+    # the full-resolution guided upsampling of the background runs in a thread of its own beside the
+    # foreground's GrabCut and outline snapping (OpenCV frees the GIL)
+    side = ThreadPoolExecutor(max_workers=1, thread_name_prefix="stylize3d-prior")
+    guided = side.submit(_guided, photo, resize_to(background, (H, W)), round(s.edge_radius * max(H, W)), s.edge_eps)
+    side.shutdown(wait=False)
 
     fg_small = np.zeros((h, w), np.float32)
     obj_values = np.zeros((h, w), np.float32)
@@ -279,7 +285,7 @@ def estimate_prior(rgb: np.ndarray, settings: PriorSettings = PriorSettings()) -
             )
             fg_small = kept.astype(np.float32)
     # Full resolution: upsample, snap the object outlines to the photo's edges.
-    near_full = _guided(photo, resize_to(background, (H, W)), round(s.edge_radius * max(H, W)), s.edge_eps)
+    near_full = guided.result()
     matte = np.zeros((H, W), bool)
     if fg_small.any():
         snap = max(2, round(1.5 * max(H, W) / max(gh, gw)))

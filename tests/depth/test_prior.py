@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -163,3 +164,19 @@ def test_fill_small_holes_and_remove_ground():
     out = remove_ground(ground)
     assert out[5:, 40:60].all()  # the person stays
     assert not out[:, :30].any() and not out[:, 70:].any()  # the ground at both sides goes
+
+
+def test_snap_in_two_threads_gives_the_one_thread_mask(monkeypatch):
+    """A large band is snapped in two halves on two threads: the same mask as in one pass."""
+    import stylize3d_core.depth.foreground as fg
+
+    g = np.random.default_rng(3)
+    h, w = 300, 400
+    photo = cv2.GaussianBlur(g.random((h, w, 3)).astype(np.float32), (0, 0), 3)
+    yy, xx = np.mgrid[:h, :w]
+    soft = cv2.GaussianBlur(((yy - 150) ** 2 + (xx - 200) ** 2 < 110 ** 2).astype(np.float32), (0, 0), 4)
+    monkeypatch.setattr(fg, "_SPLIT_BAND_PX", 1 << 30)
+    one = snap_mask_to_edges(soft, photo, radius=9, sigma_color=0.1)
+    monkeypatch.setattr(fg, "_SPLIT_BAND_PX", 1)
+    two = snap_mask_to_edges(soft, photo, radius=9, sigma_color=0.1)
+    assert np.array_equal(one, two) and one.sum() > 1000 and (one != (soft > 0.5)).any()
