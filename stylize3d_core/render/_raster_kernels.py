@@ -35,7 +35,7 @@ def taps(pc, i, fx, fy, cx, cy, H, W, near):
     return int(x0f), int(y0f), z, wx0, wx1, wy0, wy1
 
 
-ZBUFFERS, COUNT, FILL = 0, 1, 2
+ZBUFFERS, FILL = 0, 1
 """The passes of :func:`splat_pass`."""
 
 
@@ -45,9 +45,10 @@ def splat_pass(pc, lo, hi, fx, fy, cx, cy, H, W, near, mode, strong, tol, zbuf, 
     """One pass over points lo..hi-1 and their bilinear taps (in the image, weight > 0).
 
     ``ZBUFFERS``: the least depth per pixel of every tap (``zbuf``) and of the taps of weight >= ``strong``
-    (``zfront``). ``COUNT``: per pixel the taps kept by the front test against ``front`` (``counts``).
-    ``FILL``: each kept tap's point and weight written at ``pos[pixel]`` of ``index`` / ``weight`` (then
-    ``pos`` advanced). Arrays a pass does not use may be any of the right dtype.
+    (``zfront``), and the number of taps per pixel (``counts``: room for the taps ``FILL`` may keep).
+    ``FILL``: each tap kept by the front test against ``front``: its point and weight written at
+    ``pos[pixel]`` of ``index`` / ``weight`` (then ``pos`` advanced; the two may be strided views of one
+    interleaved array). Arrays a pass does not use may be any of the right dtype.
     """
     for i in range(lo, hi):
         x0, y0, z, wx0, wx1, wy0, wy1 = taps(pc, i, fx, fy, cx, cy, H, W, near)
@@ -65,6 +66,7 @@ def splat_pass(pc, lo, hi, fx, fy, cx, cy, H, W, near, mode, strong, tol, zbuf, 
                     continue
                 q = yy * W + xx
                 if mode == ZBUFFERS:
+                    counts[q] += 1
                     if z < zbuf[q]:
                         zbuf[q] = z
                     if w >= strong and z < zfront[q]:
@@ -73,24 +75,49 @@ def splat_pass(pc, lo, hi, fx, fy, cx, cy, H, W, near, mode, strong, tol, zbuf, 
                 f = front[q]
                 if not (z <= f * tol and z * tol >= f):
                     continue
-                if mode == COUNT:
-                    counts[q] += 1
-                else:
-                    k = pos[q]
-                    index[k] = i
-                    weight[k] = w
-                    pos[q] = k + 1
+                k = pos[q]
+                index[k] = i
+                weight[k] = w
+                pos[q] = k + 1
 
 
 @jit
-def normalise(offsets, weight, threshold, wsum):
-    """Per bag: the weight sum (in bag order), then weights / sum (0 where the sum is below threshold)."""
-    for q in range(offsets.shape[0] - 1):
+def normalise(offsets, weight, index, threshold, wsum, weight_out, index_out, q0, q1):
+    """Bags q0..q1-1: the weight sum (in bag order) into ``wsum``, the weights / sum (0 where the sum is
+    below threshold) into ``weight_out`` and the indices copied into ``index_out`` (the fill's interleaved
+    slots, read once in memory order, become the contiguous arrays ``embedding_bag`` takes)."""
+    for q in range(q0, q1):
         s = np.float32(0.0)
         for k in range(offsets[q], offsets[q + 1]):
             s += weight[k]
         wsum[q] = s
         inv = np.float32(0.0) if s < threshold else np.float32(1.0) / s
         for k in range(offsets[q], offsets[q + 1]):
-            weight[k] *= inv
+            weight_out[k] = weight[k] * inv
+            index_out[k] = index[k]
 
+
+@jit
+def fill_gaps(offsets, pos, end, index, weight, q0, q1):
+    """Pixels q0..q1-1 of bags sized for every tap (``ZBUFFERS``' counts), filled by ``FILL`` part by part:
+    part t's slots of pixel q run from part t - 1's ``end`` (the bag's start for t = 0) to ``end[t, q]``, its
+    kept taps up to ``pos[t, q]``. The slots after them get weight 0 and the index of the bag's first kept
+    tap (a finite feature wherever the bag's sum is finite: no 0 * inf), so each bag sums the kept taps in
+    the same order as a bag of kept taps only, plus zeros."""
+    parts = pos.shape[0]
+    for q in range(q0, q1):
+        if offsets[q + 1] == offsets[q]:
+            continue
+        first = -1
+        a = offsets[q]
+        for t in range(parts):
+            if pos[t, q] > a:
+                first = index[a]
+                break
+            a = end[t, q]
+        if first < 0:  # no kept tap (cannot happen: the front tap passes its own test); weight 0 anyway
+            first = 0
+        for t in range(parts):
+            for k in range(pos[t, q], end[t, q]):
+                index[k] = first
+                weight[k] = 0.0
