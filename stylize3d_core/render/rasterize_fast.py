@@ -195,6 +195,7 @@ def rasterize_fast(points_cam: torch.Tensor, features: torch.Tensor, K: torch.Te
     index_out = np.empty(E, index.dtype)
     _threads.run_parts([(k.normalise, (offsets, weight, index, strong, wsum, weight_out, index_out, a, b))
                         for a, b in _threads.parts(n_pix, threads)])
+    index = weight = slots = None  # the interleaved slots are freed before the features' sums
     index, weight = index_out, weight_out
     table = features.detach()
     table = table if table.is_contiguous() else table.contiguous()
