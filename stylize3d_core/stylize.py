@@ -241,25 +241,40 @@ class Stylized3DPhoto:
         warm_up_async()  # the rasterizer's compiled kernels load while the geometry is built
         t0 = time.perf_counter()
         pts = photo.points.to_tensors()
+        early: dict = {}
+
+        def in_point_order(transfer: bool = True) -> None:
+            """What needs the points but not their geometry: the point order, the points in it, and their
+            colours ready for the colour transfer (done while the geometry waits for the FPS worker)."""
+            with torch.inference_mode(False):  # ordinary tensors, as if made outside the block below
+                strata = StratifiedOrder(pts.xyz.shape[0], settings.seed)
+                rgb = pts.rgb.detach().float().index_select(0, strata.order)
+                early.update(strata=strata, rgb=rgb, xyz=pts.xyz.detach().float().index_select(0, strata.order))
+                if transfer and self.model.config.detail_transfer:
+                    early["transfer"] = ColourTransfer(rgb)
+
         with torch.inference_mode():
             self._geom = prepare_geometry(pts.xyz, pts.rgb, photo.fov_y_deg, photo.size,
-                                          self.model.config.neighbourhood, seed=settings.seed)
+                                          self.model.config.neighbourhood, seed=settings.seed,
+                                          while_waiting=in_point_order)
             t1 = time.perf_counter()
             self._content = self.model.encode(self._geom).float()  # (M, C), float32 even under an autocast
         t2 = time.perf_counter()
-        self._strata = StratifiedOrder(self._geom.xyz.shape[0], settings.seed)
+        if not early:  # no wait came (a small cloud): the order now, the colour transfer when first asked
+            in_point_order(transfer=False)
+        self._strata = early["strata"]
         self._order = self._strata.order  # (N,)
         # (N, 3) in self._order, stored as (3, N) (render.rasterizer.columns: the camera transform's fast layout)
-        self._xyz = columns(self._geom.xyz.index_select(0, self._order))
+        self._xyz = columns(early["xyz"])
         up = self._geom.upsample  # the upsampling and the colours in self._order: dense features come out ordered
         self._in_order = self._geom._replace(
-            rgb=self._geom.rgb.index_select(0, self._order),
+            rgb=early["rgb"],
             upsample=up._replace(idx=up.idx.index_select(0, self._order), weight=up.weight.index_select(0, self._order)))
         self._stylized: Optional[torch.Tensor] = None  # (M, C) at strength 1
         self._stylized2: Optional[torch.Tensor] = None  # (M, C) of the second style, at strength 1
         self._style_stats: Optional[LabStats] = None  # colour statistics of the style (detail_transfer)
         self._style_stats2: Optional[LabStats] = None
-        self._transfer: Optional[ColourTransfer] = None  # the points' colours, ready to recolour
+        self._transfer: Optional[ColourTransfer] = early.get("transfer")  # the points' colours, ready to recolour
         self._mix = 0.0
         self._dense: Optional[torch.Tensor] = None  # (N, Cr) in self._order
         self._palette_target: Optional[LabStats] = None  # what the palette map aims at (set with the dense features)

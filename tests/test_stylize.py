@@ -457,3 +457,31 @@ def test_a_model_that_makes_non_finite_features_is_refused_once(tmp_path):
     st = Stylized3DPhoto(photo, path, StylizeSettings(bfloat16=False))
     with pytest.raises(InputError, match="NaN or infinite features"):
         st.render(Cameras.identity(photo.fov_y_deg), 24, 32)
+
+
+def test_point_order_made_while_the_geometry_waits_gives_the_same_frames(stylized, monkeypatch, tmp_path):
+    """Stylized3DPhoto builds the point order and the colour transfer's colours while the geometry waits for
+    the FPS worker (made slow here so that the wait comes): the same frames as when no wait came."""
+    import time
+
+    import stylize3d_core.models.scene_geometry as sg
+
+    path = save_checkpoint(tmp_path / "m.safetensors", Stylize3DModel(ModelConfig.lite()), 2, {})
+    settings = StylizeSettings(strength=1.0, bfloat16=False)
+    import stylize3d_core.stylize as stylize_module
+
+    real_prepare = stylize_module.prepare_geometry
+    with monkeypatch.context() as m:  # no wait: the order after the geometry, the transfer when first asked
+        m.setattr(stylize_module, "prepare_geometry", lambda *a, while_waiting=None, **k: real_prepare(*a, **k))
+        plain = Stylized3DPhoto(stylized.photo, path, settings)
+    real = sg._fps_level
+    monkeypatch.setattr(sg, "_fps_level", lambda *a: (time.sleep(0.2), real(*a))[1])
+    waited = Stylized3DPhoto(stylized.photo, path, settings)
+    assert plain._transfer is None  # no wait came: made when first asked, as before
+    assert (waited._transfer is not None) == waited.model.config.detail_transfer
+    assert torch.equal(plain._order, waited._order) and torch.equal(plain._xyz, waited._xyz)
+    style = np.random.default_rng(3).random((32, 32, 3), dtype=np.float32)
+    cam = Cameras.identity(stylized.photo.fov_y_deg)
+    plain.set_style(style)
+    waited.set_style(style)
+    assert np.array_equal(plain.render(cam, 48, 64), waited.render(cam, 48, 64))

@@ -142,3 +142,26 @@ def test_build_hierarchy_validates_at_the_top(cloud, cloud_size):
     for x, y in zip((a.stem_neighbours, *a.sample_idx, *a.down_neighbours, *a.same_neighbours, *a.xyz),
                     (b.stem_neighbours, *b.sample_idx, *b.down_neighbours, *b.same_neighbours, *b.xyz)):
         assert torch.equal(x, y)
+
+
+def test_work_while_waiting_for_fps_runs_once_and_changes_nothing(cloud, cloud_size, monkeypatch):
+    """prepare_geometry's ``while_waiting`` runs once, where the thread would wait for the first FPS (made
+    slow here so that the wait surely comes), and the geometry is the one made without it."""
+    import time
+
+    import stylize3d_core.models.scene_geometry as sg
+
+    (pts, fov), size = cloud, cloud_size
+    cfg = NeighbourhoodConfig(max_points=600)
+    plain = prepare_geometry(pts.xyz, pts.rgb, fov, size, cfg, seed=2)
+    real = sg._fps_level
+    monkeypatch.setattr(sg, "_fps_level", lambda *a: (time.sleep(0.3), real(*a))[1])
+    calls = []
+    waited = prepare_geometry(pts.xyz, pts.rgb, fov, size, cfg, seed=2, while_waiting=lambda: calls.append(1))
+    assert calls == [1]  # two FPS levels, one call
+    for a, b in zip(plain.hierarchy, waited.hierarchy):
+        if isinstance(a, tuple):
+            assert all(torch.equal(x, y) for x, y in zip(a, b))
+        elif isinstance(a, torch.Tensor):
+            assert torch.equal(a, b)
+    assert torch.equal(plain.upsample.idx, waited.upsample.idx) and torch.equal(plain.upsample.weight, waited.upsample.weight)
