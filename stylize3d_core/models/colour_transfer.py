@@ -117,7 +117,7 @@ _GAMUT_STEPS = 8
 
 def _kernels():
     """The compiled colour map (None where Numba is missing: the numpy lines then, the same colours)."""
-    return _threads.compiled(__package__ + "._colour_kernels")
+    return _threads.compiled(__package__ + "._kernels")
 
 
 def warm_up() -> None:

@@ -278,3 +278,26 @@ def test_model_config_needs_as_many_stages_as_the_neighbourhoods():
     one_stage = NeighbourhoodConfig(stage_radii=((0.015, 0.025),), downsample=(4,))
     with pytest.raises(InputError, match="stages"):
         ModelConfig(neighbourhood=one_stage)  # the lite encoder has two stages
+
+
+def test_compiled_neighbour_max_gives_the_torch_lines_values_nan_and_zeros_too(monkeypatch):
+    """The compiled neighbour max (inference, float32) against the running torch.maximum it replaces, on
+    several parts of rows, with NaNs (propagated, as torch.maximum does) and zeros of both signs."""
+    import stylize3d_core.models.encoder as enc
+
+    if enc._threads.compiled("stylize3d_core.models._kernels") is None:
+        pytest.skip("Numba does not import here: only the torch lines run")
+    g = torch.Generator().manual_seed(7)
+    feats = torch.randn(5000, 32, generator=g)
+    feats[::97, 3] = float("nan")
+    feats[1::13, 5] = 0.0
+    feats[2::13, 5] = -0.0
+    nbr = torch.randint(0, 5000, (9001, 16), generator=g)  # several parts on the pool's threads
+    with torch.no_grad():
+        fast = neighbour_max(feats, nbr)
+        monkeypatch.setattr(enc, "_compiled_max", lambda f, i: None)
+        torch_lines = neighbour_max(feats, nbr)
+    assert fast.dtype == torch.float32 and fast.shape == (9001, 32)
+    assert torch.isnan(fast[:, 3]).any() and torch.equal(torch.isnan(fast), torch.isnan(torch_lines))
+    same = ~torch.isnan(fast)
+    assert torch.equal(fast[same], torch_lines[same])  # (-0.0 == 0.0: torch's own loops differ in a zero's sign)

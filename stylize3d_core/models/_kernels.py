@@ -1,6 +1,8 @@
-"""Numba kernel of :class:`~stylize3d_core.models.colour_transfer.ColourTransfer` (imported where Numba imports).
+"""Numba kernels of the models package (imported where Numba imports): the colour map of
+:class:`~stylize3d_core.models.colour_transfer.ColourTransfer` and the encoder's neighbour max at inference
+(:func:`~stylize3d_core.models.encoder.neighbour_max`).
 
-One pass per colour: the affine L*a*b* map, the clip, and the gamut mapping's bisection of the chroma
+The colour map, one pass per colour: the affine L*a*b* map, the clip, and the gamut mapping's bisection of the chroma
 scale, in float32 with the operations of the numpy reference (``colour_transfer._linear_rgb`` and
 ``gamut_map``) in the same order, so the two give the same bits. The numpy reference makes a dozen
 temporaries of every chunk and runs its bisection on the out-of-gamut colours as separate array passes;
@@ -66,3 +68,25 @@ def transfer(lab, mean, gain, target, white, m, steps, a0, a1, out):
         out[r, 0] = L
         out[r, 1] = a
         out[r, 2] = b
+
+
+@jit
+def neighbour_max(features, idx, r0, r1, out):
+    """Rows r0..r1-1 of ``out[i, c] = max_j features[idx[i, j], c]`` (float32), the neighbours in column order
+    as the running ``torch.maximum`` of the encoder's torch lines: a NaN anywhere in a row's values is
+    kept (``torch.maximum`` propagates it), the same values otherwise (only the sign of a zero may differ,
+    as it does between torch's own vectorised and scalar loops); no (M, k, C) values and no (M, C)
+    buffers are written."""
+    k = idx.shape[1]
+    C = features.shape[1]
+    for i in range(r0, r1):
+        first = idx[i, 0]
+        for c in range(C):
+            out[i, c] = features[first, c]
+        for j in range(1, k):
+            p = idx[i, j]
+            for c in range(C):
+                v = features[p, c]
+                b = out[i, c]
+                if b == b and not (v < b):  # torch.maximum: a NaN in either wins, else the larger (ties: the new)
+                    out[i, c] = v
