@@ -706,9 +706,12 @@ def _nearest_surface(
     limit = ndc[br, bc] - s.disparity_jump  # (N,)
     nds = np.full((4, len(br)), -np.inf)
     dist = np.abs(cand[..., 0] - br) + np.abs(cand[..., 1] - bc)  # (4, N) along the row or column
-    for k in range(4):
+
+    def depth_of(k: int) -> None:  # candidate k's plane continued to its band pixels
         ok = cand[k, :, 0] >= 0
         nds[k, ok] = continue_at(nd_fit, cand[k][ok], (pix[0][ok], pix[1][ok]), _DEPTH_STEP * s.disparity_jump)[:, 0]
+
+    _two_threads(depth_of, 4)
     nds[(nds > limit) | (nds < lo)] = -np.inf  # in front of the foreground, or far beyond anything seen
     # A surface runs behind the foreground where the sources on opposite sides of the pixel (left
     # and right, or above and below) continue to the same disparity: the ground beside a card, on
@@ -742,17 +745,36 @@ def _nearest_surface(
     out[br[found], bc[found]] = (wts * finite).sum(axis=0)[found]
     if col_fit is None:
         return out, None
-    rgb = np.zeros((len(br), 3))
-    for k in range(4):
+    terms = [None] * 4
+
+    def colour_of(k: int) -> None:  # candidate k's weighted colour continued to its band pixels
         sel = wts[k] > 0
         if sel.any():
-            rgb[sel] += wts[k, sel, None] * continue_at(col_fit, cand[k][sel], (pix[0][sel], pix[1][sel]), s.max_colour_step)
+            terms[k] = (sel, wts[k, sel, None] * continue_at(col_fit, cand[k][sel], (pix[0][sel], pix[1][sel]),
+                                                             s.max_colour_step))
+
+    _two_threads(colour_of, 4)
+    rgb = np.zeros((len(br), 3))
+    for term in terms:  # summed in candidate order, as one loop would
+        if term is not None:
+            rgb[term[0]] += term[1]
     if not found.all():  # no candidate: the Voronoi continuation
         rest = np.zeros_like(band)
         rest[br[~found], bc[~found]] = True
         fb = extrapolate(col_fit, nearest, source, s.max_colour_step, rest)
         rgb[~found] = fb[br[~found], bc[~found]]
     return out, np.clip(rgb, 0.0, 1.0).astype(np.float32)
+
+
+def _two_threads(job, n: int) -> None:
+    """``job(k)`` for k in range(n): the second half in a thread of its own, the first here (numpy frees the
+    GIL on the large gathers of the band's pixels; each job writes its own rows or slot)."""
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="stylize3d-ldi-surface") as side:
+        rest = [side.submit(job, k) for k in range(n // 2, n)]
+        for k in range(n // 2):
+            job(k)
+        for f in rest:
+            f.result()
 
 
 def _edges_near_frame(fg: np.ndarray, pad: int) -> bool:
