@@ -1,7 +1,7 @@
 """A small shared thread pool for work that releases the GIL: the compiled rasterizer's passes
 (``render/rasterize_fast.py``: contiguous parts of a range, one per thread), the colour transfer's
-chunks (``models/colour_transfer.py``), the k-NN grid's queries (``points/neighbours.py``) and the IDW
-weights (``points/interpolate.py``). Jobs on
+chunks (``models/colour_transfer.py``), the k-NN grid's queries (``points/neighbours.py``), the IDW
+weights (``points/interpolate.py``) and the encoder's neighbour max (``models/encoder.py``). Jobs on
 it call Numba, numpy or OpenCV, not PyTorch: a PyTorch call gives its thread an OpenMP team of its own,
 and with more OpenMP threads than cores libgomp stops spinning between parallel regions (``embedding_bag``
 calls on the pool made every later 256 px preview 1-3 ms slower, 30.2 -> 33.6 ms measured side by side)."""
