@@ -76,10 +76,13 @@ def neighbour_max(features, idx, r0, r1, out):
     as the running ``torch.maximum`` of the encoder's torch lines: a NaN anywhere in a row's values is
     kept (``torch.maximum`` propagates it), the same values otherwise (only the sign of a zero may differ,
     as it does between torch's own vectorised and scalar loops); no (M, k, C) values and no (M, C)
-    buffers are written."""
+    buffers are written. False (rows left unfinished) at an index outside the features' rows."""
     k = idx.shape[1]
-    C = features.shape[1]
+    n, C = features.shape
     for i in range(r0, r1):
+        for j in range(k):
+            if idx[i, j] < 0 or idx[i, j] >= n:
+                return False  # the caller's checked lines say what is wrong
         first = idx[i, 0]
         for c in range(C):
             out[i, c] = features[first, c]
@@ -90,3 +93,4 @@ def neighbour_max(features, idx, r0, r1, out):
                 b = out[i, c]
                 if b == b and not (v < b):  # torch.maximum: a NaN in either wins, else the larger (ties: the new)
                     out[i, c] = v
+    return True
