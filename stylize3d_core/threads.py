@@ -12,7 +12,7 @@ import functools
 import importlib
 import os
 import threading
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Callable, List, Optional, Tuple
 
 import torch
@@ -65,3 +65,39 @@ def run_parts(jobs: List[Tuple[Callable, tuple]]) -> None:
         for f in futures:
             f.result()
 
+
+def in_parts(job: Callable[[int, int], object], n: int, min_split: int = 1,
+             k: Optional[int] = None) -> List[object]:
+    """``job(a, b)`` on the :func:`parts` of range(n), ``k`` of them (default :func:`threads`; one below
+    ``min_split``), the first in this thread and the rest on the pool; their results in order (a compiled
+    kernel's False says it found an input it does not take, for the caller's checked path)."""
+    ranges = parts(n, (k or threads()) if n >= min_split else 1)
+    results: List[object] = [None] * len(ranges)
+
+    def one(j: int, a: int, b: int) -> None:
+        results[j] = job(a, b)
+
+    run_parts([(one, (j, a, b)) for j, (a, b) in enumerate(ranges)])
+    return results
+
+
+def beside(fn: Callable, *args) -> Future:
+    """``fn(*args)`` in a new thread of its own, for work beside the caller's that is not a pool job (it may
+    itself use the pool, or the caller may be a pool job: pool jobs never wait on each other); the future
+    has its result or exception."""
+    side = ThreadPoolExecutor(max_workers=1, thread_name_prefix="stylize3d-beside")
+    try:
+        return side.submit(fn, *args)
+    finally:
+        side.shutdown(wait=False)
+
+
+def halves(job: Callable[[int], None], n: int) -> None:
+    """``job(i)`` for i in range(n): the first half in this thread, the second in one :func:`beside` it
+    (numpy and OpenCV free the GIL on large arrays); each job writes its own rows or slot."""
+    rest = beside(lambda: [job(i) for i in range(n // 2, n)])
+    try:
+        for i in range(n // 2):
+            job(i)
+    finally:
+        rest.result()

@@ -38,3 +38,30 @@ def test_threads_follow_torch():
         torch.set_num_threads(before)
     assert 1 <= threads.threads() <= threads.THREADS
 
+
+
+def test_in_parts_covers_the_range_and_returns_each_parts_result_in_order():
+    seen = []
+
+    def job(a, b):
+        seen.extend(range(a, b))
+        return (a, b)
+
+    out = threads.in_parts(job, 10, k=3)
+    assert out == [(0, 3), (3, 6), (6, 10)] and sorted(seen) == list(range(10))
+    assert threads.in_parts(job, 10, min_split=100, k=3) == [(0, 10)]  # below min_split: one part
+
+
+def test_beside_runs_in_another_thread_and_halves_runs_every_job():
+    main = threading.current_thread().name
+    assert threads.beside(lambda: threading.current_thread().name).result() != main
+    names = {}
+    threads.halves(lambda i: names.__setitem__(i, threading.current_thread().name), 5)
+    assert sorted(names) == list(range(5))
+    assert {names[0], names[1]} == {main} and all(names[i] != main for i in (2, 3, 4))
+    failed = threads.beside(lambda: 1 / 0)
+    try:
+        failed.result()
+        raise AssertionError("the exception was lost")
+    except ZeroDivisionError:
+        pass

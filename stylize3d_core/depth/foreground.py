@@ -9,13 +9,13 @@ resolution.
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from typing import Tuple
 
 import cv2
 import numpy as np
 
 from ..io.images import to_uint8
+from ..threads import halves
 from ._util import normalise_percentiles
 from .fill import fill_nearest
 
@@ -252,15 +252,12 @@ def snap_mask_to_edges(soft: np.ndarray, photo: np.ndarray, radius: int, sigma_c
         out[y, x] = vote > 0.5 * total
 
     # halves of a large band in two threads (numpy frees the GIL on arrays this large: a 1 MP photo's
-    # 0.12 s -> ~0.07 s); a thread of its own, not the shared pool, so a pool job may call this
+    # 0.12 s -> ~0.07 s)
     n = ys.size
     if n < _SPLIT_BAND_PX:
         part(0, n)
     else:
-        with ThreadPoolExecutor(max_workers=1, thread_name_prefix="stylize3d-snap") as side:
-            half = side.submit(part, n // 2, n)
-            part(0, n // 2)
-            half.result()
+        halves(lambda i: part(*((0, n // 2), (n // 2, n))[i]), 2)
     return out
 
 

@@ -49,7 +49,6 @@ contact sheet ``docs/depth_contact_sheet.png`` shows it on the bundled samples.
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import NamedTuple, Optional
 
@@ -57,6 +56,7 @@ import cv2
 import numpy as np
 
 from ..checks import check_range
+from ..threads import beside
 from ._util import check_rgb, nearness_to_depth, normalise_percentiles, resize_long_side, resize_to
 from .foreground import foreground_objects, grabcut_foreground, saliency_map, snap_mask_to_edges
 
@@ -261,9 +261,7 @@ def estimate_prior(rgb: np.ndarray, settings: PriorSettings = PriorSettings()) -
     background = cv2.GaussianBlur(background, (0, 0), max(h, w) / 100)
     # the full-resolution guided upsampling of the background runs in a thread of its own beside the
     # foreground's GrabCut and outline snapping (OpenCV frees the GIL)
-    side = ThreadPoolExecutor(max_workers=1, thread_name_prefix="stylize3d-prior")
-    guided = side.submit(_guided, photo, resize_to(background, (H, W)), round(s.edge_radius * max(H, W)), s.edge_eps)
-    side.shutdown(wait=False)
+    guided = beside(_guided, photo, resize_to(background, (H, W)), round(s.edge_radius * max(H, W)), s.edge_eps)
 
     fg_small = np.zeros((h, w), np.float32)
     obj_values = np.zeros((h, w), np.float32)

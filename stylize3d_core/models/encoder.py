@@ -167,14 +167,7 @@ def _compiled_max(features: torch.Tensor, neighbour_idx: torch.Tensor) -> Option
     f = features.detach().contiguous().numpy()
     idx = neighbour_idx.contiguous().numpy()
     out = np.empty((idx.shape[0], f.shape[1]), np.float32)
-    m = idx.shape[0]
-    parts = _threads.parts(m, _threads.threads() if m >= 4096 else 1)
-    ok = [True] * len(parts)
-
-    def part(j: int, a: int, b: int) -> None:
-        ok[j] = kernels.neighbour_max(f, idx, a, b, out)
-
-    _threads.run_parts([(part, (j, a, b)) for j, (a, b) in enumerate(parts)])
+    ok = _threads.in_parts(lambda a, b: kernels.neighbour_max(f, idx, a, b, out), idx.shape[0], 4096)
     return torch.from_numpy(out) if all(ok) else None  # an index out of range: the checked lines raise
 
 

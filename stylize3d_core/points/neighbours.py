@@ -160,9 +160,8 @@ class GridKNN:
         idx = np.empty((m, k), np.int64)
         d = np.empty((m, k), np.float32)
         g = self._g
-        parts = _threads.parts(m, _threads.threads() if m >= 4096 else 1)
-        _threads.run_parts([(g.knn_query, (self._sorted, self._order, self._start, self._lo, self._h, self._dims,
-                                           qry, a, b, k, idx, d)) for a, b in parts if b > a])
+        _threads.in_parts(lambda a, b: g.knn_query(self._sorted, self._order, self._start, self._lo, self._h,
+                                                   self._dims, qry, a, b, k, idx, d), m, 4096)
         return idx, d
 
 

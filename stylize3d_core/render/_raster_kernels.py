@@ -82,42 +82,35 @@ def splat_pass(pc, lo, hi, fx, fy, cx, cy, H, W, near, mode, strong, tol, zbuf, 
 
 
 @jit
-def normalise(offsets, weight, index, threshold, wsum, weight_out, index_out, q0, q1):
-    """Bags q0..q1-1: the weight sum (in bag order) into ``wsum``, the weights / sum (0 where the sum is
-    below threshold) into ``weight_out`` and the indices copied into ``index_out`` (the fill's interleaved
-    slots, read once in memory order, become the contiguous arrays ``embedding_bag`` takes)."""
-    for q in range(q0, q1):
-        s = np.float32(0.0)
-        for k in range(offsets[q], offsets[q + 1]):
-            s += weight[k]
-        wsum[q] = s
-        inv = np.float32(0.0) if s < threshold else np.float32(1.0) / s
-        for k in range(offsets[q], offsets[q + 1]):
-            weight_out[k] = weight[k] * inv
-            index_out[k] = index[k]
-
-
-@jit
-def fill_gaps(offsets, pos, end, index, weight, q0, q1):
-    """Pixels q0..q1-1 of bags sized for every tap (``ZBUFFERS``' counts), filled by ``FILL`` part by part:
-    part t's slots of pixel q run from part t - 1's ``end`` (the bag's start for t = 0) to ``end[t, q]``, its
-    kept taps up to ``pos[t, q]``. The slots after them get weight 0 and the index of the bag's first kept
-    tap (a finite feature wherever the bag's sum is finite: no 0 * inf), so each bag sums the kept taps in
-    the same order as a bag of kept taps only, plus zeros."""
+def normalise(offsets, pos, end, weight, index, threshold, wsum, weight_out, index_out, q0, q1):
+    """Bags q0..q1-1, sized for every tap (``ZBUFFERS``' counts) and filled by ``FILL`` part by part: part
+    t's slots of pixel q run from part t - 1's ``end`` (the bag's start for t = 0) to ``end[t, q]``, its kept
+    taps up to ``pos[t, q]``. Per bag: the kept taps' weight sum (in bag order) into ``wsum``; their weights
+    / sum (0 where the sum is below threshold) and indices into ``weight_out`` / ``index_out``, contiguous
+    as ``embedding_bag`` takes them; the slots of dropped taps get weight 0 and the index of the bag's first
+    kept tap (a finite feature wherever the bag's sum is finite: no 0 * inf), so each bag sums what a bag
+    of the kept taps alone sums. The fill's interleaved slots are read once, in memory order."""
     parts = pos.shape[0]
     for q in range(q0, q1):
-        if offsets[q + 1] == offsets[q]:
-            continue
+        s = np.float32(0.0)
         first = -1
         a = offsets[q]
         for t in range(parts):
-            if pos[t, q] > a:
+            for k in range(a, pos[t, q]):
+                s += weight[k]
+            if first < 0 and pos[t, q] > a:
                 first = index[a]
-                break
             a = end[t, q]
-        if first < 0:  # no kept tap (cannot happen: the front tap passes its own test); weight 0 anyway
+        wsum[q] = s
+        inv = np.float32(0.0) if s < threshold else np.float32(1.0) / s
+        if first < 0:  # an empty bag (a bag with taps keeps its front tap)
             first = 0
+        a = offsets[q]
         for t in range(parts):
+            for k in range(a, pos[t, q]):
+                weight_out[k] = weight[k] * inv
+                index_out[k] = index[k]
             for k in range(pos[t, q], end[t, q]):
-                index[k] = first
-                weight[k] = 0.0
+                weight_out[k] = 0.0
+                index_out[k] = first
+            a = end[t, q]

@@ -11,15 +11,16 @@ per point:
 2. bags: each tap the front test keeps (``zfront / tol <= z <= zfront * tol``) writes its point
    index and splat weight, pixel-major, into one 8-byte slot (int32 index and float32 weight
    interleaved: one cache line per scattered write; a counting sort: within a pixel the taps keep
-   the points' order); the slots of the taps it drops get weight 0 and the index of the bag's
-   first kept tap, so each bag sums what a bag of the kept taps alone sums;
-3. per pixel (not per point), the weight sum (in bag order), the hole test and the normalised
-   weights, written with the indices as the contiguous arrays that
-   ``torch.nn.functional.embedding_bag`` sums the features with.
+   the points' order);
+3. per pixel (not per point), the kept taps' weight sum (in bag order), the hole test and the
+   normalised weights, written with the indices as the contiguous arrays that
+   ``torch.nn.functional.embedding_bag`` sums the features with; the slots of the taps the front
+   test dropped get weight 0 and the index of the bag's first kept tap, so each bag sums what a
+   bag of the kept taps alone sums.
 
 On the 1 MP sample at 512x342 (every point) the passes took 22.5 + 15.9 + 46.4 ms (z-buffers, a
 separate count of the kept taps, the fill into separate index and weight arrays) + 6.6 ms of
-normalisation; now 24 + 27 ms + 3 ms for the dropped taps' slots + 6 ms (both threads), the same bits.
+normalisation; now 20 + 27 + 8 ms (both threads, one run of 14 frames), the same bits.
 
 A tap's position and weight come from the same float32 formulas as the tensor path's
 (``u = fx * x / max(z, 1e-8) + cx``, ``a = u - 0.5``, weights ``1 - |x0 + dx - a|``),
@@ -28,7 +29,8 @@ so both keep the same taps; the sums differ by float rounding only (their order 
 not depend on the chunking or on the number of threads: the z-buffers are a min, the
 counts integers, and the bags hold each pixel's taps in point order.
 
-Passes 1-2 run in parts of the points (pass 3 and the dropped taps' slots in parts of the pixels) on :data:`stylize3d_core.threads.THREADS` threads (the kernels release
+Passes 1-2 run in parts of the points (pass 3 in parts of the pixels) on
+:data:`stylize3d_core.threads.THREADS` threads (the kernels release
 the GIL); with ``should_stop``, each pass runs in chunks of points with the check before
 each. The kernels are compiled on first use and cached on disk (Numba's ``cache=True``).
 Where Numba cannot be imported, :func:`available` is False and the tensor path runs.
@@ -183,20 +185,18 @@ def rasterize_fast(points_cam: torch.Tensor, features: torch.Tensor, K: torch.Te
         start += c
         end[t] = start
     run(k.FILL, lambda t: (f32, f32, front, i64, pos[t], index, weight))
-    # the slots of taps the front test dropped (taps behind the front: hidden-layer points, ~15 % at 1 MP)
-    # get weight 0: the bags sum the kept taps as before, without a pass over the points to count them
-    _threads.run_parts([(k.fill_gaps, (offsets, pos, end, index, weight, a, b))
-                        for a, b in _threads.parts(n_pix, threads)])
 
     if should_stop is not None and should_stop():
         raise RenderInterrupted("render stopped while rasterizing")
+    # per pixel: the kept taps normalised, the slots of dropped ones (taps behind the front: hidden-layer
+    # points, ~15 % at 1 MP) weight 0, so the bags sum the kept taps as before without a pass over the
+    # points to count them
     wsum = np.empty(n_pix, np.float32)
     weight_out = np.empty(E, np.float32)
     index_out = np.empty(E, index.dtype)
-    _threads.run_parts([(k.normalise, (offsets, weight, index, strong, wsum, weight_out, index_out, a, b))
-                        for a, b in _threads.parts(n_pix, threads)])
-    index = weight = slots = None  # the interleaved slots are freed before the features' sums
-    index, weight = index_out, weight_out
+    _threads.in_parts(lambda a, b: k.normalise(offsets, pos, end, weight, index, strong, wsum, weight_out,
+                                               index_out, a, b), n_pix, k=threads)
+    index, weight, slots = index_out, weight_out, None  # the interleaved slots are freed before the sums
     table = features.detach()
     table = table if table.is_contiguous() else table.contiguous()
     with torch.no_grad():

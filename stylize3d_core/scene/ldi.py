@@ -71,7 +71,6 @@ Coordinates: canvas pixel ``(i, j)`` is photo pixel ``(i - pad, j - pad)``.
 from __future__ import annotations
 
 import math
-from concurrent.futures import ThreadPoolExecutor
 
 from dataclasses import dataclass, field
 from typing import Literal, NamedTuple, Optional, Tuple, Union
@@ -87,6 +86,7 @@ from ..geometry.camera_range import (
     CameraRange, border_overshoot, edge_parallax, range_corner_poses, trajectory_extreme_cameras,
 )
 from ..io.images import to_uint8
+from ..threads import beside, halves
 from ._fill import (
     LinearFit, anchored, box_clusters, continue_at, cross_median, extrapolate, local_linear_fit, nearest_index, push_pull,
     ring_min, scan_nearest, split_fit, torn_regions,
@@ -328,12 +328,10 @@ def build_ldi(
     cover = _coverage(nd, fg, settings, fov)
     pad = cover.pad
     # the border (its push-pull fills) and the hidden layer behind the photo's edges do not depend on each
-    # other: the border runs in a thread of its own beside the hidden layer (OpenCV and numpy free the GIL
-    # on whole images; a thread of its own, not the shared pool, whose jobs must never wait on each other)
-    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="stylize3d-ldi-border") as side:
-        border = side.submit(_border, image, nd, fg, pad, settings)
-        hidden = _hidden_layer(image, nd, fg, bg, cover.widths, settings) if cover.widths.any() else None
-        rgb0, nd0, outer = border.result()
+    # other: the border is built beside the hidden layer (OpenCV and numpy free the GIL on whole images)
+    border = beside(_border, image, nd, fg, pad, settings)
+    hidden = _hidden_layer(image, nd, fg, bg, cover.widths, settings) if cover.widths.any() else None
+    rgb0, nd0, outer = border.result()
     hc, wc = h + 2 * pad, w + 2 * pad
     inner = (slice(pad, pad + h), slice(pad, pad + w))
     label = np.full((hc, wc), BORDER, np.uint8)
@@ -711,7 +709,7 @@ def _nearest_surface(
         ok = cand[k, :, 0] >= 0
         nds[k, ok] = continue_at(nd_fit, cand[k][ok], (pix[0][ok], pix[1][ok]), _DEPTH_STEP * s.disparity_jump)[:, 0]
 
-    _two_threads(depth_of, 4)
+    halves(depth_of, 4)
     nds[(nds > limit) | (nds < lo)] = -np.inf  # in front of the foreground, or far beyond anything seen
     # A surface runs behind the foreground where the sources on opposite sides of the pixel (left
     # and right, or above and below) continue to the same disparity: the ground beside a card, on
@@ -753,7 +751,7 @@ def _nearest_surface(
             terms[k] = (sel, wts[k, sel, None] * continue_at(col_fit, cand[k][sel], (pix[0][sel], pix[1][sel]),
                                                              s.max_colour_step))
 
-    _two_threads(colour_of, 4)
+    halves(colour_of, 4)
     rgb = np.zeros((len(br), 3))
     for term in terms:  # summed in candidate order, as one loop would
         if term is not None:
@@ -764,17 +762,6 @@ def _nearest_surface(
         fb = extrapolate(col_fit, nearest, source, s.max_colour_step, rest)
         rgb[~found] = fb[br[~found], bc[~found]]
     return out, np.clip(rgb, 0.0, 1.0).astype(np.float32)
-
-
-def _two_threads(job, n: int) -> None:
-    """``job(k)`` for k in range(n): the second half in a thread of its own, the first here (numpy frees the
-    GIL on the large gathers of the band's pixels; each job writes its own rows or slot)."""
-    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="stylize3d-ldi-surface") as side:
-        rest = [side.submit(job, k) for k in range(n // 2, n)]
-        for k in range(n // 2):
-            job(k)
-        for f in rest:
-            f.result()
 
 
 def _edges_near_frame(fg: np.ndarray, pad: int) -> bool:
