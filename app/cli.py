@@ -87,6 +87,9 @@ def _add_training(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--teacher-fraction", type=float, default=d.teacher_fraction,
                    help=f"stage 2: share of stylized samples that learn from their teacher "
                         f"(default {d.teacher_fraction})")
+    p.add_argument("--style-stages", default=",".join(map(str, d.style_stages)), metavar="S,S,...",
+                   help="stage 2: EfficientNet stages (0-4) of the global style loss "
+                        f"(default {','.join(map(str, d.style_stages))})")
 
 
 def _add_info(sub: "argparse._SubParsersAction") -> None:
@@ -187,6 +190,13 @@ def _loss_weights(items):
     return LossWeights(**values)
 
 
+def _stages(text: str):
+    try:
+        return tuple(int(part) for part in text.split(","))
+    except ValueError:
+        raise InputError("--style-stages", f"expected comma-separated integers such as 1,2,3, got {text!r}") from None
+
+
 def _train(args: argparse.Namespace) -> int:
     from stylize3d_core.train.trainer import TrainConfig, train
 
@@ -197,6 +207,7 @@ def _train(args: argparse.Namespace) -> int:
         max_hours=args.hours, init=args.init, init_stylizer=args.init_stylizer, seed=args.seed,
         threads=args.threads, weights=_loss_weights(args.weight), recon_fraction=args.recon_fraction,
         teacher_dir=args.teacher, teacher_fraction=args.teacher_fraction,
+        style_stages=_stages(args.style_stages),
     )
     path = train(config, log=lambda msg: print(f"{PROG}: {msg}", file=sys.stderr, flush=True))
     print(f"{PROG}: checkpoint {path}", file=sys.stderr)

@@ -49,7 +49,8 @@ from ..io.atomic import atomic_path
 from ..models.checkpoint import load_checkpoint, save_checkpoint
 from ..models.colour_transfer import lab_stats, transfer_colours
 from ..models.efficientnet_lite import EfficientNetLiteFeatures
-from ..models.losses import (PerceptualLoss, PerceptualLossConfig, StylizationLoss, colour_statistics_loss, detail_loss,
+from ..models.losses import (PerceptualLoss, PerceptualLossConfig, StylizationLoss, StylizationLossConfig,
+                             colour_statistics_loss, detail_loss,
                              sharpness_loss)
 from ..models.style_features import StyleEncoder
 from ..models.stylize3d import (ConfigName, ModelConfig, Stylize3DModel, add_colour_transform, add_detail_path,
@@ -137,6 +138,9 @@ class TrainConfig:
         teacher_dir: stage 2, a folder written by :func:`~.teacher.build_teacher` for ``data_dir``; None: no teacher.
         teacher_fraction: stage 2, share of the stylized samples that use their teacher (the rest take a
             random style crop and only the AdaAttN losses).
+        style_stages: stage 2, the EfficientNet stages (0..4) whose feature mean/std the global style
+            loss matches (default (1, 2), the public code's; the quality benchmark's EfficientNet
+            distance measures stages 1-3).
     """
 
     stage: int = 1
@@ -160,6 +164,7 @@ class TrainConfig:
     threads: Optional[int] = None
     teacher_dir: Optional[str] = None
     teacher_fraction: float = 0.7
+    style_stages: Tuple[int, ...] = (1, 2)
 
     def __post_init__(self) -> None:
         if self.stage not in (1, 2):
@@ -176,6 +181,10 @@ class TrainConfig:
         if self.teacher_dir is not None and self.stage != 2:
             raise InputError("teacher_dir", "the teacher trains stylization: stage 2 only")
         check_range(self.teacher_fraction, "teacher_fraction", 0.0, 1.0)
+        stages = tuple(self.style_stages)
+        if not stages or len(set(stages)) != len(stages) or any(
+                not isinstance(s, int) or not 0 <= s <= 4 for s in stages):
+            raise InputError("style_stages", f"expected distinct EfficientNet stages in 0..4, got {self.style_stages!r}")
         if self.max_hours is not None:
             check_range(self.max_hours, "max_hours", 0.0, 1e4, inclusive=False)
 
@@ -212,12 +221,12 @@ class TrainStep(nn.Module):
     """
 
     def __init__(self, model: Stylize3DModel, features: EfficientNetLiteFeatures, weights: LossWeights,
-                 consistency_points: int) -> None:
+                 consistency_points: int, style_stages: Tuple[int, ...] = StylizationLossConfig().style_stages) -> None:
         super().__init__()
         self.model = model
         self.style_encoder = StyleEncoder(extractor=features)
         self.perceptual = PerceptualLoss(PerceptualLossConfig(), extractor=features)
-        self.stylization = StylizationLoss(extractor=features)
+        self.stylization = StylizationLoss(StylizationLossConfig(style_stages=tuple(style_stages)), extractor=features)
         self.weights = weights
         self.consistency_points = consistency_points
 
@@ -342,7 +351,7 @@ def train(config: TrainConfig, log: Log = print) -> Path:
     else:
         model.stylizer.requires_grad_(False)  # stage 1 never uses the stylizer
     features = EfficientNetLiteFeatures(stages=(0, 1, 2, 3, 4)).to(device)
-    step = TrainStep(model, features, config.weights, config.consistency_points).to(device)
+    step = TrainStep(model, features, config.weights, config.consistency_points, config.style_stages).to(device)
     ddp = torch.nn.parallel.DistributedDataParallel(step, device_ids=[local] if device.type == "cuda" else None) \
         if world > 1 else step
     params = [p for p in model.parameters() if p.requires_grad]

@@ -227,3 +227,12 @@ def test_train_loss_weight_overrides_are_checked(capsys):
                        ("colour=-1", ">= 0"), ("colour=nan", ">= 0")):
         assert main(["train", "--stage", "2", "--weight", bad]) == 2
         assert words in capsys.readouterr().err
+
+
+def test_train_style_stages_are_checked(capsys):
+    from app.cli import _stages
+
+    assert _stages("1,2,3") == (1, 2, 3)
+    for bad, words in (("1,x", "comma-separated integers"), ("1,9", "style_stages"), ("2,2", "style_stages")):
+        assert main(["train", "--stage", "2", "--style-stages", bad]) == 2
+        assert words in capsys.readouterr().err

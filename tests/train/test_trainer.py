@@ -91,6 +91,21 @@ def test_training_style_features_are_the_style_encoders(data):
         assert got.shape == want.shape and torch.allclose(got, want)
 
 
+def test_style_stages_reach_the_global_style_loss():
+    """The style loss matches the stages it is given: stage 3 changes the loss, and only through stage 3."""
+    torch.manual_seed(0)
+    features = EfficientNetLiteFeatures(stages=(0, 1, 2, 3, 4))
+    pred, content, style = torch.rand(1, 3, 64, 64), torch.rand(1, 3, 64, 64), torch.rand(1, 3, 64, 64)
+    maps = features(style)
+    losses = {}
+    for stages in ((1, 2), (1, 2, 3), (3,)):
+        step = TrainStep(Stylize3DModel(ModelConfig.lite()), features, LossWeights(), 64, stages)
+        losses[stages] = float(step.stylization(pred, content, maps).style)
+    assert losses[(1, 2, 3)] == pytest.approx(losses[(1, 2)] + losses[(3,)], rel=1e-5)
+    assert losses[(3,)] > 0
+    assert TrainConfig().style_stages == (1, 2)
+
+
 def test_training_refuses_data_of_other_neighbourhoods(data, tmp_path):
     other = tmp_path / "other"
     build_dataset(other, 1, DataConfig(image_size=(32, 40), scene_textures=3, texture_size=32,
@@ -155,6 +170,9 @@ def test_bad_settings(data, tmp_path):
         TrainConfig(model="huge")
     with pytest.raises(InputError, match="lr_schedule"):
         TrainConfig(lr_schedule="step")
+    for stages in ((), (1, 1), (5,), (-1,), (1.0,)):
+        with pytest.raises(InputError, match="style_stages"):
+            TrainConfig(style_stages=stages)
     with pytest.raises(InputError, match="stage-1"):
         train(TrainConfig(stage=2, data_dir=str(data / "train"), out_dir=str(tmp_path / "x")), log=lambda _: None)
     with pytest.raises(InputError):
