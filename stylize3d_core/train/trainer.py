@@ -50,8 +50,7 @@ from ..models.checkpoint import load_checkpoint, save_checkpoint
 from ..models.colour_transfer import lab_stats, transfer_colours
 from ..models.efficientnet_lite import EfficientNetLiteFeatures
 from ..models.losses import (PerceptualLoss, PerceptualLossConfig, StylizationLoss, StylizationLossConfig,
-                             colour_statistics_loss, detail_loss,
-                             sharpness_loss)
+                             colour_statistics_loss, detail_loss, sharpness_loss)
 from ..models.style_features import StyleEncoder
 from ..models.stylize3d import (ConfigName, ModelConfig, Stylize3DModel, add_colour_transform, add_detail_path,
                                 add_texture_residual)
@@ -164,7 +163,7 @@ class TrainConfig:
     threads: Optional[int] = None
     teacher_dir: Optional[str] = None
     teacher_fraction: float = 0.7
-    style_stages: Tuple[int, ...] = (1, 2)
+    style_stages: Tuple[int, ...] = StylizationLossConfig.style_stages
 
     def __post_init__(self) -> None:
         if self.stage not in (1, 2):
@@ -221,7 +220,7 @@ class TrainStep(nn.Module):
     """
 
     def __init__(self, model: Stylize3DModel, features: EfficientNetLiteFeatures, weights: LossWeights,
-                 consistency_points: int, style_stages: Tuple[int, ...] = StylizationLossConfig().style_stages) -> None:
+                 consistency_points: int, style_stages: Tuple[int, ...] = StylizationLossConfig.style_stages) -> None:
         super().__init__()
         self.model = model
         self.style_encoder = StyleEncoder(extractor=features)
