@@ -211,6 +211,8 @@ class AdaAttNConfig:
                 raise InputError("AdaAttNConfig", f"style stage {s} out of range 0..{n - 1}")
         if not self.key_stages:
             raise InputError("AdaAttNConfig.key_stages", "must name at least one stage")
+        if any(c < 1 for c in self.style_channels):
+            raise InputError("AdaAttNConfig.style_channels", f"must all be >= 1, got {self.style_channels}")
         for name in ("content_channels", "hidden", "value_channels", "qk_channels", "chunk_size"):
             if getattr(self, name) < 1:
                 raise InputError(f"AdaAttNConfig.{name}", f"must be >= 1, got {getattr(self, name)}")

@@ -137,9 +137,12 @@ def load_checkpoint(path: PathLike) -> Checkpoint:
         raise InputError(p, f"checkpoint version {meta.get('version')!r} is not supported "
                             f"(expected one of {', '.join(READABLE_VERSIONS)})")
     config = config_from_json(meta.get("config", ""), p, meta["version"])
-    model = Stylize3DModel(config)
+    try:  # shapes only, no memory: a configuration may ask for any size; the file's own tensors bound it
+        with torch.device("meta"):
+            own = Stylize3DModel(config).state_dict()
+    except (RuntimeError, ValueError, TypeError, OverflowError, MemoryError) as e:
+        raise InputError(p, f"the checkpoint's model configuration cannot be built ({e})") from None
     missing, unexpected = [], []
-    own = model.state_dict()
     for k in own:
         if k not in tensors:
             missing.append(k)
@@ -153,6 +156,7 @@ def load_checkpoint(path: PathLike) -> Checkpoint:
             raise InputError(p, f"weight {k} has shape {tuple(tensors[k].shape)}, the architecture needs {tuple(v.shape)}")
         if tensors[k].is_floating_point() and not torch.isfinite(tensors[k]).all():
             raise InputError(p, f"weight {k} contains NaN or infinite values")
+    model = Stylize3DModel(config)  # as large as the weights just checked
     model.load_state_dict({k: tensors[k].to(v.dtype) for k, v in own.items()})
     model.eval()
     try:

@@ -98,5 +98,6 @@ def test_fuzz_target(target, tmp_path):
     env = {**os.environ, "TMPDIR": str(tmp_path)}  # libFuzzer exits without atexit: its files stay in tmp_path
     run = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=BUDGET_S + 240)
     crashes = sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(("crash-", "timeout-", "oom-")))
-    assert run.returncode == 0 and not crashes, f"{crashes}\n{run.stderr[-4000:]}"
+    # atheris prints an uncaught exception's traceback on stdout, libFuzzer its own report on stderr
+    assert run.returncode == 0 and not crashes, f"{crashes}\n{run.stdout[-4000:]}\n{run.stderr[-2000:]}"
     assert "Done" in run.stderr  # libFuzzer finished its budget

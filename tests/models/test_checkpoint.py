@@ -88,6 +88,24 @@ def test_nan_weights_are_refused(tmp_path):
         load_checkpoint(path)
 
 
+def test_a_configuration_asking_for_huge_or_negative_sizes_is_refused_without_allocating(tmp_path):
+    """Found by the fuzzer: a mutated width reached nn.Linear (negative: RuntimeError; huge: gigabytes)."""
+    import dataclasses
+
+    good = save_checkpoint(tmp_path / "m.safetensors", _model(), 1, {})
+    lite = ModelConfig.lite()
+    huge = dataclasses.replace(lite, stylizer=dataclasses.replace(lite.stylizer, hidden=2**20))
+    bad = tmp_path / "huge.safetensors"
+    _with_metadata(good, bad, config=config_to_json(huge))  # a 2**20 x 2**20 layer: 4 TiB of floats
+    with pytest.raises(InputError, match="huge.safetensors.*shape"):
+        load_checkpoint(bad)
+    cfg = json.loads(config_to_json(lite))
+    cfg["stylizer"]["style_channels"][3] = -59
+    _with_metadata(good, bad, config=json.dumps(cfg))
+    with pytest.raises(InputError, match="style_channels"):
+        load_checkpoint(bad)
+
+
 def _with_metadata(src, dst, **changes):
     from safetensors import safe_open
     from safetensors.torch import load_file, save_file
