@@ -64,12 +64,13 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Dict, List, Tuple
+from typing import Dict, List, Optional, Tuple
 
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's app and library
 
+from app.viewer.backend import BACKENDS, backend_choice
 from app.viewer.orbit import OrbitPose, pose_camera
 from app.viewer.session import DEFAULT_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE, ViewerSession
 from app.viewer.state import PreviewSettings, choose_preview_long_side
@@ -351,7 +352,7 @@ the GUI thread's turn, handing it to the widget; frames replaced in the hand-ove
 
 
 def window(model: str, megapixels: float, tmp: str, max_size: int, repeats: int, threads: int,
-           plain: bool = False) -> None:
+           plain: bool = False, render_backend: Optional[str] = None) -> None:
     """The viewer in its own process on Xvfb, driven with real XTest drags (see the module docstring)."""
     import json
     import multiprocessing
@@ -383,6 +384,7 @@ def window(model: str, megapixels: float, tmp: str, max_size: int, repeats: int,
     argv = [path, "--style", str(SAMPLE_STYLE), *(["--no-model"] if plain else ["--model", model]),
             "--max-size", str(max_size or max(big_hw)),
             "--threads", str(threads), "--size", f"{screen[0]}x{screen[1]}",
+            *(["--render-backend", render_backend] if render_backend else []),
             "--test-script", str(script), "--test-report", str(report)]
     proc = multiprocessing.get_context("spawn").Process(target=run_viewer_process, args=(argv, display))
     proc.start()
@@ -450,7 +452,7 @@ def window(model: str, megapixels: float, tmp: str, max_size: int, repeats: int,
     loaded = max_size or max(big_hw)
     side = stats.get("preview_sides", [])
     print(f"window (Xvfb, real XTest drags, {'no model: the plain 3D photo' if plain else 'model ' + Path(model).name}"
-          f", torch threads {threads}): photo {w}x{h} "
+          f", torch threads {threads}, render back end {backend_choice(render_backend)}): photo {w}x{h} "
           f"({w * h / 1e6:.2f} MP) opened at long side {loaded}; {len(drags)} drags; load average "
           f"{os.getloadavg()[0]:.1f}")
     print(f"  frames shown while dragging: {med(fig['fps']):5.1f} fps median (range {rng(fig['fps'])})"
@@ -541,6 +543,8 @@ def main() -> None:
                         "(the four figures of issue 13)")
     parser.add_argument("--plain", action="store_true", help="--window without the model (the plain 3D photo: "
                         "what the window itself costs)")
+    parser.add_argument("--render-backend", default=None, choices=sorted(BACKENDS),
+                        help="--window: the viewer's graphics back end (default: the viewer's, opengl)")
     parser.add_argument("--megapixels", type=float, default=1.0, help="photo size of --interactive and --window "
                         "(default 1 MP)")
     parser.add_argument("--repeats", type=int, default=2, help="drag pairs per settings in --interactive (default 2)")
@@ -552,7 +556,7 @@ def main() -> None:
     if args.window:
         with tempfile.TemporaryDirectory() as tmp:
             window(args.model or str(DEFAULT_MODEL), args.megapixels, tmp, args.max_size, args.repeats, args.threads,
-                   args.plain)
+                   args.plain, args.render_backend)
         return
     if args.interactive:
         model = args.model or str(DEFAULT_MODEL)

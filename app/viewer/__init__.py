@@ -3,6 +3,7 @@
     stylize3d-viewer [PHOTO] [--style STYLE] [--depth SPEC] [--refine-depth METHOD]
                      [--model CHECKPOINT | --no-model]
                      [--max-size 640] [--fov DEG] [--strength 1] [--threads 1] [--size 1280x800] [--invert-wheel]
+                     [--render-backend opengl|vulkan|auto]
                      [--test-script steps.json --test-report report.json]
 
 Modules: :mod:`.orbit` (camera math), :mod:`.state` (view state, preview sizes,
@@ -32,6 +33,7 @@ from stylize3d_core.pipeline import PhotoSpec
 from stylize3d_core.resources import resolve_model
 
 from ..options import add_options, from_args
+from .backend import BACKENDS, DEFAULT_BACKEND, ENV_VAR, backend_choice, select_backend
 from .session import DEFAULT_MODEL
 from .state import VIEWER_MAX_SIZE
 
@@ -59,6 +61,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "draws the window; more threads only help on an otherwise idle machine with more cores)")
     p.add_argument("--invert-wheel", action="store_true",
                    help="wheel up moves backwards (default: wheel up moves forwards, as in common 3D viewers)")
+    p.add_argument("--render-backend", default=None, choices=sorted(BACKENDS),
+                   help=f"graphics back end that draws the window (default {DEFAULT_BACKEND}, or "
+                        f"${ENV_VAR}; auto: Open3D's choice, Vulkan on a software-only Vulkan device, "
+                        "whose redraws cost several times OpenGL's: see app/viewer/backend.py)")
     p.add_argument("--size", default="1280x800", metavar="WxH", help="window size in pixels (default 1280x800)")
     p.add_argument("--test-script", default=None, metavar="JSON", help="run these test steps (see app/viewer/script.py)")
     p.add_argument("--test-report", default=None, metavar="JSON", help="where the test script writes its report")
@@ -87,6 +93,11 @@ def main(argv: Optional[List[str]] = None) -> int:
     if args.threads < 1:
         print(f"{PROG}: --threads must be >= 1, got {args.threads}", file=sys.stderr)
         return 2
+    try:
+        backend = backend_choice(args.render_backend)
+    except ValueError as e:
+        print(f"{PROG}: error: {e}", file=sys.stderr)
+        return 2
     model = args.model
     if model is not None:
         try:
@@ -112,6 +123,9 @@ def main(argv: Optional[List[str]] = None) -> int:
 
     steps = read_script(args.test_script) if args.test_script else None
     app = gui.Application.instance
+    chosen = select_backend(backend)  # before the engine exists: initialize() creates it
+    if chosen != backend:
+        print(f"{PROG}: render back end: {chosen}", file=sys.stderr)
     app.initialize()
     viewer = ViewerWindow(ViewerOptions(spec=spec, style=args.style, model=model, use_model=not args.no_model,
                                         strength=args.strength, width=width, height=height,

@@ -380,10 +380,9 @@ class Panel:
 
     def add_style_thumbnail(self, thumb_u8, tooltip: str, on_click) -> None:
         """Add a clickable (THUMB_PX, THUMB_PX, 3) uint8 thumbnail to the style strip."""
-        import numpy as np
-        import open3d as o3d
+        from .backend import widget_image
 
-        img = gui.ImageWidget(o3d.geometry.Image(np.ascontiguousarray(thumb_u8)))
+        img = gui.ImageWidget(widget_image(thumb_u8))
         img.tooltip = tooltip
 
         def on_mouse(e: gui.MouseEvent) -> int:

@@ -47,6 +47,7 @@ from stylize3d_core.render.plain import frame_size
 from . import panel as P
 from .actions import CameraPathController, ExportController, PhotoController, ui_callback
 from .applications import ApplicationsController
+from .backend import widget_image
 from .orbit import HOME, OrbitLimits, apply_drag, apply_wheel, orbit
 from .session import NO_MODEL, ViewerSession, ViewFrame, colour_jump, shown_as
 from .render_state import RenderPhase, RenderStateMachine, refine_levels
@@ -167,7 +168,7 @@ class ViewerWindow:
         self.app.menubar = P.build_menubar(self.settings.recent_photos, self.settings.recent_styles)
         w = self.window = self.app.create_window("stylize3d viewer", self.options.width, self.options.height)
         self.em = em = w.theme.font_size
-        self.image = gui.ImageWidget(o3d.geometry.Image(np.full((8, 12, 3), 32, np.uint8)))
+        self.image = gui.ImageWidget(widget_image(np.full((8, 12, 3), 32, np.uint8)))
         self.image.set_on_mouse(self._on_mouse)
         self.image.set_on_key(self._on_view_key)
         self.panel = p = P.Panel(em, self.state)
@@ -538,7 +539,7 @@ class ViewerWindow:
             frame = session.render_view(cam, size, None, preview=preview, stylized=stylized, should_stop=stop,
                                         split=split, calibrate=scale >= 1.0, timings=times)
             t = time.perf_counter()
-            image = o3d.geometry.Image(frame.image)  # the GUI thread only hands it to the widget
+            image = widget_image(frame.image)  # the GUI thread only hands it to the widget
             times["image"] = time.perf_counter() - t
             return frame, image, times
 

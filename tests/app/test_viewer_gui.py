@@ -157,6 +157,32 @@ def test_open_orbit_export_and_survive_bad_files(display, tmp_path):
     assert np.abs(pixels(tmp_path / "still_usable.png") - after).mean() > 2  # still there, still moving
     window = pixels(tmp_path / "window.png")
     assert window.shape[0] > 200 and window.std() > 20
+    upright, flipped = view_orientation(window, before)
+    assert upright > 0.9 and upright > flipped + 0.2, (
+        f"the view on screen is not the frame upright: row-profile correlation {upright:.2f} upright, "
+        f"{flipped:.2f} upside down (the image widget's orientation under the render back end)")
+
+
+def view_orientation(window: np.ndarray, frame: np.ndarray) -> Tuple[float, float]:
+    """Correlations of the on-screen view's row profile (mean grey per row) with ``frame``'s, upright and
+    upside down. The view is found in ``window`` (a grab) as the longest run of rows of its left half that
+    are not flat (the menu bar above it is a shorter run), then the longest run of columns in those rows
+    that are not flat (the side panel is beside it); the frame's profile is resampled to as many rows."""
+    def longest_run(busy: np.ndarray) -> Tuple[int, int]:
+        edges = np.diff(np.concatenate([[0], busy.astype(np.int8), [0]]))
+        starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+        assert starts.size, "no view found in the window grab"
+        k = int(np.argmax(ends - starts))
+        return int(starts[k]), int(ends[k])
+
+    grey = window.mean(axis=2)
+    y0, y1 = longest_run(grey[:, : window.shape[1] // 2].std(axis=1) > 3.0)
+    x0, x1 = longest_run(grey[y0:y1].std(axis=0) > 3.0)
+    assert y1 - y0 > 50 and x1 - x0 > 50, "no view found in the window grab"
+    on_screen = grey[y0:y1, x0:x1].mean(axis=1)
+    profile = frame.mean(axis=(1, 2))
+    resampled = np.interp(np.linspace(0, len(profile) - 1, len(on_screen)), np.arange(len(profile)), profile)
+    return (float(np.corrcoef(on_screen, resampled)[0, 1]), float(np.corrcoef(on_screen, resampled[::-1])[0, 1]))
 
 
 def test_closing_during_an_export_leaves_no_file_and_does_not_crash(display, tmp_path):
