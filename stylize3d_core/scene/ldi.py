@@ -43,7 +43,11 @@ Stage 3 of the pipeline (docs/architecture.md, "Pipeline stages"), after 3DPhoto
    the nearest source, or, where the sources on opposite sides of the pixel
    along its row or column continue to the same surface and that surface is not
    the nearest source's, the inverse-squared-distance blend of the sources on
-   it (the ground behind a card that hides the ground / wall crease). The depth
+   it (the ground behind a card that hides the ground / wall crease). Those
+   pixels, and the others between the same two sources, take their colour
+   where the texture's isophotes through them meet the gap's two sides (the
+   sides' profiles matched for the shift an isophote makes across the gap), not
+   straight along the row or column. The depth
    is then smoothed by a small normalised convolution and
    clamped to lie behind the foreground by at least ``disparity_jump``; the
    colour, background-only, never takes a foreground pixel's, so no foreground
@@ -88,8 +92,8 @@ from ..geometry.camera_range import (
 from ..io.images import to_uint8
 from ..threads import beside, halves
 from ._fill import (
-    LinearFit, anchored, box_clusters, continue_at, cross_median, extrapolate, local_linear_fit, nearest_index, push_pull,
-    ring_min, scan_nearest, split_fit, torn_regions,
+    LinearFit, across_gap, anchored, box_clusters, continue_at, cross_median, extrapolate, local_linear_fit,
+    nearest_index, push_pull, ring_min, scan_nearest, split_fit, torn_regions,
 )
 
 ORIGINAL = 0
@@ -638,7 +642,7 @@ def _hidden_layer(
             bg_nd = ndc[source][nearest]  # (h, w)
         chosen_rgb = None
         if s.hidden_depth == "surface":
-            bg_nd, chosen_rgb = _nearest_surface(nd_fit, col_fit, source, band, ndc, bg_nd, lo, s, scan, nearest)
+            bg_nd, chosen_rgb = _nearest_surface(nd_fit, col_fit, source, band, ndc, bg_nd, lo, s, scan, nearest, rgbc)
         # smooth the seams of that fill within band + sources (normalised convolution)
         weight = (band | source).astype(np.float32)
         sigma = min(_MAX_DEPTH_SIGMA, max(1.0, band_px / 8.0))
@@ -687,6 +691,7 @@ def _used_sources(
 def _nearest_surface(
     nd_fit: LinearFit, col_fit: Optional[LinearFit], source: np.ndarray, band: np.ndarray, ndc: np.ndarray,
     fallback_nd: np.ndarray, lo: float, s: LDISettings, scan: np.ndarray, nearest: np.ndarray,
+    rgbc: Optional[np.ndarray] = None,
 ) -> Tuple[np.ndarray, Optional[np.ndarray]]:
     """Hidden-layer disparity (h, w) and colour (N, 3) of the band's N pixels (raster order) or None.
 
@@ -761,7 +766,40 @@ def _nearest_surface(
         rest[br[~found], bc[~found]] = True
         fb = extrapolate(col_fit, nearest, source, s.max_colour_step, rest)
         rgb[~found] = fb[br[~found], bc[~found]]
+    if rgbc is not None:
+        _follow_isophotes(rgb, rgbc, source, br, bc, cand, agree, found)
     return out, np.clip(rgb, 0.0, 1.0).astype(np.float32)
+
+
+def _follow_isophotes(
+    rgb: np.ndarray, rgbc: np.ndarray, source: np.ndarray, br: np.ndarray, bc: np.ndarray, cand: np.ndarray,
+    agree: np.ndarray, found: np.ndarray,
+) -> None:
+    """Recolour, in place, the band pixels (``br``, ``bc``) that take a surface their row's or column's
+    agreeing pair continues (``found``): with the colours where the texture's isophotes through them
+    meet the gap's two sides (:func:`~._fill.across_gap`), not the pair's colours continued straight
+    along the row or column. A pixel both pairs cover blends the two by inverse squared gap width."""
+    acc = np.zeros(rgb.shape)
+    total = np.zeros(len(br))
+    h, w = source.shape
+    for a, b in ((0, 1), (2, 3)):
+        sel = found & agree[a] & agree[b]
+        if not sel.any():
+            continue
+        # and every pixel between the same two sources (beside the card, nearer one of them than anything)
+        key = (cand[a, :, 0].astype(np.int64) * w + cand[a, :, 1]) * (h * w) + cand[b, :, 0] * w + cand[b, :, 1]
+        sel = (cand[a, :, 0] >= 0) & (cand[b, :, 0] >= 0) & np.isin(key, key[sel])
+        if a == 0:  # left / right: along the rows
+            col, ok = across_gap(rgbc, source, br[sel], bc[sel], cand[a, sel, 1], cand[b, sel, 1])
+            gap = cand[b, sel, 1] - cand[a, sel, 1]
+        else:  # above / below: the same along the columns
+            col, ok = across_gap(rgbc.transpose(1, 0, 2), source.T, bc[sel], br[sel], cand[a, sel, 0], cand[b, sel, 0])
+            gap = cand[b, sel, 0] - cand[a, sel, 0]
+        wt = np.where(ok, 1.0 / np.maximum(gap, 1).astype(np.float64) ** 2, 0.0)
+        acc[sel] += wt[:, None] * col
+        total[sel] += wt
+    done = total > 0
+    rgb[done] = acc[done] / total[done, None]
 
 
 def _edges_near_frame(fg: np.ndarray, pad: int) -> bool:

@@ -565,3 +565,29 @@ def test_anchored_fit_starts_from_the_source_value_on_smooth_signals_only():
     at_q = damped.mean[..., 0] + damped.grad[..., 0, 0] * (x - damped.centre[..., 0]) + damped.grad[..., 0, 1] * (
         y - damped.centre[..., 1])
     np.testing.assert_allclose(flat.mean[..., 0][q], at_q[q], atol=1e-9)
+
+
+def test_across_gap_follows_slanted_stripes_and_reads_sources_only():
+    from stylize3d_core.scene._fill import across_gap
+
+    y, x = np.mgrid[:60, :80].astype(np.float64)
+    # stripes whose isophotes climb 0.06 rows a column (2.5 rows across the gap, less than half a period)
+    rgb = np.stack([0.5 + 0.3 * np.sin(0.9 * (y + 0.06 * x) + ph) for ph in (0.0, 1.0, 2.0)], axis=-1)
+    gap = (x >= 20) & (x <= 59)
+    source = ~gap
+    seen = np.where(gap[..., None], 5.0, rgb)  # the foreground's colour, never to be read
+    rows = np.repeat(np.arange(20, 40), 40)
+    cols = np.tile(np.arange(20, 60), 20)
+    left, right = np.full(rows.size, 19), np.full(rows.size, 60)
+    got, ok = across_gap(seen, source, rows, cols, left, right)
+    assert ok.all()
+    truth = rgb[rows, cols]
+    straight = (rgb[rows, 19] / (cols - 19.0)[:, None] ** 2 + rgb[rows, 60] / (60.0 - cols)[:, None] ** 2) / (
+        1.0 / (cols - 19.0) ** 2 + 1.0 / (60.0 - cols) ** 2)[:, None]
+    assert np.abs(straight - truth).max() > 0.15  # along the row: across the stripes
+    assert np.abs(got - truth).max() < 0.05  # along the isophotes: the stripes (interpolated between rows)
+    assert got.max() <= 0.81  # no foreground colour
+    # only the rows of the given pixels are read: one row alone is too few to match
+    one = rows == 30
+    got, ok = across_gap(seen, source, rows[one], cols[one], left[one], right[one])
+    assert not ok.any() and not got.any()

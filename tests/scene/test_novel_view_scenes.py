@@ -83,7 +83,7 @@ def poles_scene() -> Scene:
 
 SCENES = {"card before wall": card_scene, "slanted ground": ground_scene, "thin poles": poles_scene}
 
-FLOOR_DB = {"card before wall": 30.0, "slanted ground": 21.0, "thin poles": 30.0}
+FLOOR_DB = {"card before wall": 30.0, "slanted ground": 24.0, "thin poles": 30.0}
 """Least PSNR on the disoccluded pixels per scene, a little under what the 3D photo reaches today
 (the issue's target is 30 dB; the slanted ground misses it, see docs/clean_3d_photos.md)."""
 
