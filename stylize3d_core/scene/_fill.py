@@ -507,7 +507,7 @@ def continue_at(fit: LinearFit, at: np.ndarray, pixels: Tuple[np.ndarray, np.nda
     return mean + np.clip(grad[..., 0] * dx + grad[..., 1] * dy, -max_step, max_step)
 
 
-_MATCH_ROWS = 6
+_MATCH_ROWS = 8
 """Rows on either side of a pixel over which the two sides' profiles are matched (:func:`across_gap`)."""
 _MATCH_SHIFT = 12.0
 """Largest shift (rows) between the two sides' profiles, i.e. of an isophote across the gap."""

@@ -767,28 +767,48 @@ def _nearest_surface(
         fb = extrapolate(col_fit, nearest, source, s.max_colour_step, rest)
         rgb[~found] = fb[br[~found], bc[~found]]
     if rgbc is not None:
-        _follow_isophotes(rgb, rgbc, source, br, bc, cand, agree, found)
+        _follow_isophotes(rgb, rgbc, source, br, bc, cand, agree, found, nearest)
     return out, np.clip(rgb, 0.0, 1.0).astype(np.float32)
+
+
+_MIX_FIT = 0.05
+"""A row (column) beside the recoloured ones is taken for an anti-aliased crease where the two surfaces'
+mix explains the gap's sides up to this share of their neighbours' difference (squared)."""
 
 
 def _follow_isophotes(
     rgb: np.ndarray, rgbc: np.ndarray, source: np.ndarray, br: np.ndarray, bc: np.ndarray, cand: np.ndarray,
-    agree: np.ndarray, found: np.ndarray,
+    agree: np.ndarray, found: np.ndarray, nearest: np.ndarray,
 ) -> None:
     """Recolour, in place, the band pixels (``br``, ``bc``) that take a surface their row's or column's
     agreeing pair continues (``found``): with the colours where the texture's isophotes through them
     meet the gap's two sides (:func:`~._fill.across_gap`), not the pair's colours continued straight
-    along the row or column. A pixel both pairs cover blends the two by inverse squared gap width."""
+    along the row or column. A pixel both pairs cover blends the two by inverse squared gap width.
+
+    The row (column) just beside those, between the same two sides' neighbours, that continues the
+    same nearest source as its recoloured neighbour lies on the crease between that source's surface
+    and the recoloured one (a wall above a ground): its pixels are anti-aliased mixtures of the two.
+    Where the gap's sides show such a mix (their pixel there lies between its two neighbours across
+    the crease, up to ``_MIX_FIT``), the pixel takes the same mix of its own colour (the nearest
+    source's surface continued) and its recoloured neighbour's."""
     acc = np.zeros(rgb.shape)
     total = np.zeros(len(br))
     h, w = source.shape
+    edges = []
     for a, b in ((0, 1), (2, 3)):
         sel = found & agree[a] & agree[b]
         if not sel.any():
             continue
         # and every pixel between the same two sources (beside the card, nearer one of them than anything)
         key = (cand[a, :, 0].astype(np.int64) * w + cand[a, :, 1]) * (h * w) + cand[b, :, 0] * w + cand[b, :, 1]
-        sel = (cand[a, :, 0] >= 0) & (cand[b, :, 0] >= 0) & np.isin(key, key[sel])
+        both = (cand[a, :, 0] >= 0) & (cand[b, :, 0] >= 0)
+        sel = both & np.isin(key, key[sel])
+        step = w * (h * w + 1) if a == 0 else h * w + 1  # the same sides one row (column) on
+        pair = agree[a] & agree[b] & both & ~sel
+        for sign in (1, -1):
+            edge = pair & np.isin(key + sign * step, key[sel])
+            if edge.any():
+                edges.append((a, b, sign, edge))
         if a == 0:  # left / right: along the rows
             col, ok = across_gap(rgbc, source, br[sel], bc[sel], cand[a, sel, 1], cand[b, sel, 1])
             gap = cand[b, sel, 1] - cand[a, sel, 1]
@@ -800,6 +820,43 @@ def _follow_isophotes(
         total[sel] += wt
     done = total > 0
     rgb[done] = acc[done] / total[done, None]
+    if not edges:
+        return
+    index = np.full(source.shape, -1, np.int64)
+    index[br, bc] = np.arange(len(br))
+    for a, b, sign, edge in edges:
+        # a row (column) between the same two sides next to the recoloured ones: where the surface
+        # meets the nearest source's (a crease), its pixels are anti-aliased mixtures of the two;
+        # the mix is measured on the gap's two sides and applied to the two colours beside the pixel
+        k = np.nonzero(edge)[0]
+        dr, dc = (sign, 0) if a == 0 else (0, sign)
+        inner = index[br[k] + dr, bc[k] + dc]  # the recoloured neighbour
+        num = np.zeros(k.size)
+        den = np.zeros(k.size)
+        sides = []
+        # a crease: the pixel continues the same nearest source as its neighbour, which takes another surface
+        usable = (inner >= 0) & (nearest[br[k], bc[k]] == nearest[br[k] + dr, bc[k] + dc])
+        for side in (a, b):
+            sr, sc = cand[side, k, 0], cand[side, k, 1]
+            ir, ic = sr + dr, sc + dc
+            orow, ocol = sr - dr, sc - dc
+            inside = (ir >= 0) & (ir < h) & (ic >= 0) & (ic < w) & (orow >= 0) & (orow < h) & (ocol >= 0) & (ocol < w)
+            ir, ic, orow, ocol = (np.clip(ir, 0, h - 1), np.clip(ic, 0, w - 1), np.clip(orow, 0, h - 1),
+                                  np.clip(ocol, 0, w - 1))
+            ok = inside & source[ir, ic] & source[orow, ocol]
+            v, v_in, v_out = rgbc[sr, sc], rgbc[ir, ic], rgbc[orow, ocol]
+            sides.append((ok, v, v_in, v_out))
+            num += np.where(ok, ((v - v_in) * (v_out - v_in)).sum(axis=1), 0.0)
+            den += np.where(ok, ((v_out - v_in) ** 2).sum(axis=1), 0.0)
+            usable &= ok
+        usable &= den > 1e-6
+        alpha = np.clip(num / np.maximum(den, 1e-12), 0.0, 1.0)[:, None]  # share of the other surface
+        # a mixture: the sides' pixels lie between their two neighbours (texture is not)
+        miss = sum(np.where(ok, ((v - v_in - alpha * (v_out - v_in)) ** 2).sum(axis=1), 0.0)
+                   for ok, v, v_in, v_out in sides)
+        usable &= miss <= _MIX_FIT * den
+        k, alpha, inner = k[usable], alpha[usable], inner[usable]
+        rgb[k] = alpha * rgb[k] + (1.0 - alpha) * rgb[inner]
 
 
 def _edges_near_frame(fg: np.ndarray, pad: int) -> bool:
