@@ -57,6 +57,8 @@ class OrbitLimits:
             see :class:`~stylize3d_core.geometry.camera_range.CameraRange` (same defaults).
         deg_per_pixel: orbit degrees per pixel of mouse drag. Default 0.04 (8 degrees in 200 px).
         dolly_per_tick: forward move per wheel step, as a fraction of the centre depth. Default 0.04.
+        pan_gain: a pan drag moves the camera this many times the distance that keeps the centre plane
+            under the cursor. Default 1.
     """
 
     max_yaw_deg: float = _RANGE.max_yaw_deg
@@ -67,11 +69,13 @@ class OrbitLimits:
     near_margin: float = _RANGE.near_margin
     deg_per_pixel: float = 0.04
     dolly_per_tick: float = 0.04
+    pan_gain: float = 1.0
 
     def __post_init__(self) -> None:
         self.camera_range()  # validates the range fields
         check_range(self.deg_per_pixel, "deg_per_pixel", 0.0, 10.0)
         check_range(self.dolly_per_tick, "dolly_per_tick", 0.0, 1.0)
+        check_range(self.pan_gain, "pan_gain", 0.0, 100.0)
 
     def camera_range(self) -> CameraRange:
         """The range part of these limits."""
@@ -79,11 +83,29 @@ class OrbitLimits:
                            self.max_dolly, self.near_margin)
 
     @staticmethod
-    def from_range(rng: CameraRange, **speeds: float) -> "OrbitLimits":
-        """Limits of the range ``rng`` (e.g. a photo's ``Photo3D.camera_range``); ``speeds``
-        may set ``deg_per_pixel`` and ``dolly_per_tick``."""
+    def from_range(rng: CameraRange, *, relative: bool = True, **speeds: float) -> "OrbitLimits":
+        """Limits of the range ``rng`` (e.g. a photo's ``Photo3D.camera_range``); ``speeds`` may set
+        ``deg_per_pixel``, ``dolly_per_tick`` and ``pan_gain`` (default: the class defaults).
+
+        ``relative`` (default): the speeds are those of the default range (``CameraRange()``) and are
+        scaled by ``rng``'s size against it (yaw, dolly and pan each by its own limit), so the same drag
+        or wheel steps cross the same share of any photo's range: 200 px of drag from the input view to
+        the yaw limit, 15 wheel steps to the forward limit, at the default speeds. A photo's range is
+        often a small part of the default one (0.06-0.25 of it on the bundled samples): at fixed speeds
+        12-50 px of drag reached its limit, and the rest of a drag changed nothing. ``relative=False``
+        keeps the speeds as given."""
+        if relative:
+            base = OrbitLimits(**speeds)
+            speeds = dict(deg_per_pixel=base.deg_per_pixel * _ratio(rng.max_yaw_deg, _RANGE.max_yaw_deg),
+                          dolly_per_tick=base.dolly_per_tick * _ratio(rng.max_dolly, _RANGE.max_dolly),
+                          pan_gain=base.pan_gain * _ratio(rng.max_pan, _RANGE.max_pan))
         return OrbitLimits(rng.max_yaw_deg, rng.max_pitch_deg, rng.max_pan, rng.min_dolly,
                            rng.max_dolly, rng.near_margin, **speeds)
+
+
+def _ratio(value: float, default: float) -> float:
+    """``value / default`` (0 where the default range has no extent)."""
+    return float(value) / float(default) if default > 0 else 0.0
 
 
 @dataclass(frozen=True)
@@ -192,8 +214,8 @@ def apply_drag(pose: OrbitPose, mode: DragMode, dx_px: float, dy_px: float, view
     """The pose after a mouse drag of ``(dx, dy)`` pixels (x right, y down) in a view ``view_height_px`` tall.
 
     ``"orbit"`` turns ``limits.deg_per_pixel`` per pixel; ``"pan"`` moves the
-    camera so the centre plane follows the cursor (``centre_depth / f`` scene
-    units per pixel, ``f`` the focal length in pixels).
+    camera ``limits.pan_gain`` times as far as keeps the centre plane under the cursor
+    (``centre_depth / f`` scene units per pixel, ``f`` the focal length in pixels).
     """
     if mode == "orbit":
         k = limits.deg_per_pixel
@@ -202,7 +224,7 @@ def apply_drag(pose: OrbitPose, mode: DragMode, dx_px: float, dy_px: float, view
         if view_height_px <= 0:
             raise InputError("view_height_px", f"must be > 0, got {view_height_px!r}")
         f = 0.5 * view_height_px / math.tan(math.radians(check_fov(fov_y_deg)) / 2.0)
-        s = scene.centre_depth / f
+        s = limits.pan_gain * scene.centre_depth / f
         return pan(pose, -s * dx_px, -s * dy_px, scene, limits)
     raise InputError("drag mode", f"must be 'orbit' or 'pan', got {mode!r}")
 

@@ -576,6 +576,7 @@ class ScriptRunner:
             doc = json.loads(json.dumps(asdict(user_choices(s)), default=str))
             for name in ("photo_info", "loaded_path", "playback", "keyframes"):
                 del doc[name]
-            return {**doc, "photo_loaded": s.photo_info is not None, "stylized_shown": shows_stylized(s)}
+            return {**doc, "photo_loaded": s.photo_info is not None, "stylized_shown": shows_stylized(s),
+                    "limits": asdict(self.window.limits)}
 
         return self.main(state)

@@ -62,6 +62,8 @@ DOUBLE_CLICK_S = 0.35
 CLOSE_GRACE_S = 0.25
 """Open3D turns the Esc key into a close request *before* it delivers the key event, so a close request
 waits this long for an Esc key-down that follows it: if one comes, it was Esc (cancel / hide), not a close."""
+NUDGE_PX = 25
+"""An arrow key turns the view as far as a drag of this many pixels (1 degree in the default range)."""
 MIN_WINDOW = (640, 480)
 """Smallest window (width, height): below it the panel and the view do not fit."""
 
@@ -266,8 +268,7 @@ class ViewerWindow:
         ``Photo3D.camera_range``), size the view for it and request its first frame."""
         info = self.state.photo_info
         if info is not None:
-            self.limits = OrbitLimits.from_range(info.camera_range, deg_per_pixel=self.limits.deg_per_pixel,
-                                                 dolly_per_tick=self.limits.dolly_per_tick)
+            self.limits = OrbitLimits.from_range(info.camera_range)  # speeds relative to its range
             self.state = clamp_state_pose(self.state, info.scene, self.limits)
         self._display_hw = (0, 0)
         self._update_display_size()
@@ -825,7 +826,8 @@ class ViewerWindow:
         if self.state.photo_info is None:
             return
         scene = self.state.photo_info.scene
-        self.state = replace(self.state, pose=orbit(self.state.pose, yaw, pitch, scene, self.limits))
+        step = NUDGE_PX * self.limits.deg_per_pixel  # an arrow key turns as far as a short drag
+        self.state = replace(self.state, pose=orbit(self.state.pose, step * yaw, step * pitch, scene, self.limits))
         self.view_changed()
 
     # -- look: stylized / original, strength ----------------------------------------------------

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -161,9 +162,34 @@ def test_limits_come_from_the_library_range():
 
     assert LIMITS.camera_range() == CameraRange()  # the viewer's defaults are the library's
     photo_range = CameraRange().scaled(0.25)
-    limits = OrbitLimits.from_range(photo_range, deg_per_pixel=0.02)
+    limits = OrbitLimits.from_range(photo_range, deg_per_pixel=0.02, relative=False)
     assert limits.camera_range() == photo_range and limits.deg_per_pixel == 0.02
     c = clamp_pose(OrbitPose(100, 100, 5, 5, 10), SCENE, limits)
     assert (c.yaw_deg, c.pitch_deg, c.pan_x) == (photo_range.max_yaw_deg, photo_range.max_pitch_deg,
                                                  photo_range.max_pan)
     assert c.dolly <= photo_range.max_dolly * SCENE.centre_depth + 1e-12
+
+
+def test_speeds_relative_to_the_photo_range_cross_it_in_the_same_drag():
+    """A photo's range is often a small part of the default one: at the default speeds 200 px of drag
+    reach the yaw limit, 15 wheel steps the forward limit and a pan drag the pan limit as far as in the
+    default range, whatever the photo's range."""
+    from stylize3d_core.geometry.camera_range import CameraRange
+
+    for scale in (1.0, 0.25, 0.06):
+        rng = CameraRange().scaled(scale)
+        limits = OrbitLimits.from_range(rng)
+        assert limits.deg_per_pixel == pytest.approx(0.04 * scale)
+        assert limits.pan_gain == pytest.approx(scale) and limits.dolly_per_tick == pytest.approx(0.04 * scale)
+        pose = HOME
+        for _ in range(199):  # 199 one-pixel moves: not yet at the limit
+            pose = apply_drag(pose, "orbit", 1, 0, 500, 60.0, SCENE, limits)
+        assert pose.yaw_deg == pytest.approx(rng.max_yaw_deg * 199 / 200)
+        assert apply_drag(pose, "orbit", 5, 0, 500, 60.0, SCENE, limits).yaw_deg == pytest.approx(rng.max_yaw_deg)
+        wheel = apply_wheel(HOME, 15, SCENE, limits)  # 15 steps: the forward limit (unless the near margin stops it)
+        assert wheel.dolly == pytest.approx(min(rng.max_dolly * SCENE.centre_depth,
+                                                clamp_pose(replace(HOME, dolly=9.0), SCENE, limits).dolly))
+        default_pan = apply_drag(HOME, "pan", 3, 0, 500, 60.0, SCENE, OrbitLimits())
+        assert apply_drag(HOME, "pan", 3, 0, 500, 60.0, SCENE, limits).pan_x == pytest.approx(scale * default_pan.pan_x)
+    with pytest.raises(InputError, match="pan_gain"):
+        OrbitLimits(pan_gain=-1.0)

@@ -304,8 +304,11 @@ def test_real_mouse_drag_and_key_press(display, tmp_path):
 
     code, report = run_viewer(display, tmp_path, steps, ["--no-model"], during=interact)
     check_ran(code, report)
-    yaw = step(report, "state", 0)["result"]["pose"]["yaw_deg"]
-    assert yaw > 1.0, f"the mouse drag did not orbit (yaw {yaw})"
+    state = step(report, "state", 0)["result"]
+    yaw, limits = state["pose"]["yaw_deg"], state["limits"]
+    # 100 px of drag turn half the photo's yaw range (200 px reach the limit, whatever the range)
+    assert yaw == pytest.approx(100 * limits["deg_per_pixel"], rel=0.3), f"the mouse drag did not orbit (yaw {yaw})"
+    assert 0.3 * limits["max_yaw_deg"] < yaw < limits["max_yaw_deg"], "the drag was clamped: speeds not relative to the range"
     assert np.abs(pixels(tmp_path / "after.png") - pixels(tmp_path / "before.png")).mean() > 5
     assert step(report, "state", 1)["result"]["pose"]["yaw_deg"] == 0.0, "the R key did not reset the view"
 
