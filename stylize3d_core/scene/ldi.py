@@ -785,9 +785,10 @@ def _follow_isophotes(
     meet the gap's two sides (:func:`~._fill.across_gap`), not the pair's colours continued straight
     along the row or column. A pixel both pairs cover blends the two by inverse squared gap width.
 
-    The row (column) just beside those, between the same two sides' neighbours, that continues the
-    same nearest source as its recoloured neighbour lies on the crease between that source's surface
-    and the recoloured one (a wall above a ground): its pixels are anti-aliased mixtures of the two.
+    The row (column) just beside those, between the same two sides' neighbours, whose pixels continue
+    a source beyond them (on the far side from the recoloured neighbour) lies on the crease between
+    that source's surface and the recoloured one (a wall above a ground): its pixels are anti-aliased
+    mixtures of the two.
     Where the gap's sides show such a mix (their pixel there lies between its two neighbours across
     the crease, up to ``_MIX_FIT``), the pixel takes the same mix of its own colour (the nearest
     source's surface continued) and its recoloured neighbour's."""
@@ -824,6 +825,7 @@ def _follow_isophotes(
         return
     index = np.full(source.shape, -1, np.int64)
     index[br, bc] = np.arange(len(br))
+    src_r, src_c = np.nonzero(source)  # ``nearest`` indexes these
     for a, b, sign, edge in edges:
         # a row (column) between the same two sides next to the recoloured ones: where the surface
         # meets the nearest source's (a crease), its pixels are anti-aliased mixtures of the two;
@@ -834,8 +836,9 @@ def _follow_isophotes(
         num = np.zeros(k.size)
         den = np.zeros(k.size)
         sides = []
-        # a crease: the pixel continues the same nearest source as its neighbour, which takes another surface
-        usable = (inner >= 0) & (nearest[br[k], bc[k]] == nearest[br[k] + dr, bc[k] + dc])
+        # a crease: the pixel continues a source beyond it, on the far side from its recoloured neighbour
+        q = nearest[br[k], bc[k]]
+        usable = (inner >= 0) & (((src_r[q] - br[k]) * dr + (src_c[q] - bc[k]) * dc) < 0)
         for side in (a, b):
             sr, sc = cand[side, k, 0], cand[side, k, 1]
             ir, ic = sr + dr, sc + dc

@@ -591,3 +591,37 @@ def test_across_gap_follows_slanted_stripes_and_reads_sources_only():
     one = rows == 30
     got, ok = across_gap(seen, source, rows[one], cols[one], left[one], right[one])
     assert not ok.any() and not got.any()
+
+
+def test_hidden_colour_follows_slanted_stripes_and_the_anti_aliased_crease_behind_a_card():
+    """A card hides a wall / ground crease; the ground's texture is stripes slanted across the rows
+    (a receding ground's compressed texture) and the crease row is anti-aliased (its centre on the
+    wall, half its colour the ground's). Behind the card, the ground's rows follow the stripes across
+    the gap (not the rows beside the card copied along: across the stripes), and the crease row keeps
+    the mix its neighbours beside the card show (not the wall continued down from above the card)."""
+    h, w, crease = 120, 160, 50
+    y, x = np.mgrid[:h, :w].astype(np.float32)
+    bg_nd = np.where(y < crease, 0.2, 0.2 + 0.01 * (y - crease + 1))
+    depth = (1.0 / bg_nd).astype(np.float32)
+    wall = np.float32([0.2, 0.3, 0.8])
+    ground = np.stack([0.5 + 0.3 * np.sin(0.9 * (y + 0.06 * x) + ph) for ph in (0.0, 1.0, 2.0)], axis=-1)
+    bg_rgb = np.where((y < crease)[..., None], wall, ground).astype(np.float32)
+    bg_rgb[crease - 1] = 0.5 * wall + 0.5 * ground[crease]  # the crease row
+    rgb = bg_rgb.copy()
+    card = (slice(45, 110), slice(60, 100))
+    depth[card] = 1.0 / 1.5
+    rgb[card] = (0.9, 0.9, 0.2)
+    ldi = build_ldi(rgb, depth, LDISettings(band=0.1))
+    mask = photo(ldi, ldi.hidden_mask)
+    got = photo(ldi, ldi.hidden_rgb)
+    assert mask[crease - 1:crease + 8, 60:100].all()
+    err = np.abs(got - bg_rgb).max(axis=-1)  # (h, w)
+    crease_row = err[crease - 1, 60:100]
+    below = err[crease:crease + 8, 60:100]
+    copied = np.abs(rgb[crease:crease + 8, 57:58] - bg_rgb[crease:crease + 8, 60:100]).max(axis=-1)  # a side's rows
+    print(f"\nbehind the card: colour error on the crease row mean {crease_row.mean():.3f}, below it mean"
+          f" {below.mean():.3f} largest {below.max():.3f} (a side's rows copied: mean {copied.mean():.3f})")
+    assert copied.mean() > 0.15
+    assert below.mean() < 0.03 and below.max() < 0.06  # before: 0.1-0.25 a row
+    assert crease_row.mean() < 0.03  # before: 0.11 (the wall from above)
+    assert not np.any(np.all(np.abs(got[mask] - (0.9, 0.9, 0.2)) < 0.05, axis=-1))  # no card colour
