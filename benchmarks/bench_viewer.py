@@ -33,8 +33,9 @@ photo size, along an orbit drag of ``--frames`` camera positions:
   Xvfb, with the shipped model, on a photo of ``--megapixels`` (the sample
   upscaled; default 1 MP) opened as a user opens it (``--max-size``, the
   viewer's default 640, or 0 for the whole photo), driven with real XTest mouse
-  events: ``--repeats`` pairs of 1.5 s drags (mouse moves every 1/60 s), the
-  second one 0.3 s after the first, then a 3 s rest. From the window's own frame
+  events: ``--repeats`` pairs of 1.5 s drags (mouse moves of 2 px every 1/60 s:
+  180 px, right then back, inside the photo's yaw range, whose limit a drag reaches
+  after 200 px), the second one 0.3 s after the first, then a 3 s rest. From the window's own frame
   log it reports the frames per second shown while dragging, the latency from
   the XTest mouse-down to the first new frame on screen (first drag; second drag,
   while the first rest's full frame renders), the time from the mouse-up to the
@@ -50,7 +51,8 @@ The machine is shared, so the load average is printed with the figures.
 
 Run: ``python benchmarks/bench_viewer.py [--threads 1] [--frames 40]`` or
 ``python benchmarks/bench_viewer.py --interactive [--megapixels 1.0] [--repeats 2]`` or
-``python benchmarks/bench_viewer.py --window [--max-size 640] [--repeats 2]`` (needs Xvfb and libXtst;
+``python benchmarks/bench_viewer.py --window [--max-size 640] [--repeats 2] [--render-backend opengl|vulkan]
+[--save-report report.json]`` (needs Xvfb and libXtst;
 it measures the checkout it is in).
 """
 
@@ -352,7 +354,7 @@ the GUI thread's turn, handing it to the widget; frames replaced in the hand-ove
 
 
 def window(model: str, megapixels: float, tmp: str, max_size: int, repeats: int, threads: int,
-           plain: bool = False, render_backend: Optional[str] = None) -> None:
+           plain: bool = False, render_backend: Optional[str] = None, save_report: Optional[str] = None) -> None:
     """The viewer in its own process on Xvfb, driven with real XTest drags (see the module docstring)."""
     import json
     import multiprocessing
@@ -435,6 +437,8 @@ def window(model: str, megapixels: float, tmp: str, max_size: int, repeats: int,
             lx.XCloseDisplay(dpy)
         proc.join(300)
         rep = json.loads(report.read_text())
+        if save_report:  # the window's own report (its frame log) and the drags sent, for a closer look
+            Path(save_report).write_text(json.dumps({"report": rep, "drags": drags}))
     finally:
         if proc.is_alive():
             proc.kill()
@@ -543,6 +547,8 @@ def main() -> None:
                         "(the four figures of issue 13)")
     parser.add_argument("--plain", action="store_true", help="--window without the model (the plain 3D photo: "
                         "what the window itself costs)")
+    parser.add_argument("--save-report", default=None, metavar="JSON",
+                        help="--window: write the window's report (its frame log, GUI-loop turns) and the drags here")
     parser.add_argument("--render-backend", default=None, choices=sorted(BACKENDS),
                         help="--window: the viewer's graphics back end (default: the viewer's, opengl)")
     parser.add_argument("--megapixels", type=float, default=1.0, help="photo size of --interactive and --window "
@@ -556,7 +562,7 @@ def main() -> None:
     if args.window:
         with tempfile.TemporaryDirectory() as tmp:
             window(args.model or str(DEFAULT_MODEL), args.megapixels, tmp, args.max_size, args.repeats, args.threads,
-                   args.plain, args.render_backend)
+                   args.plain, args.render_backend, args.save_report)
         return
     if args.interactive:
         model = args.model or str(DEFAULT_MODEL)
