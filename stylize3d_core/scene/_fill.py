@@ -521,6 +521,10 @@ _MATCH_FIT = 1.0
 """A match counts where its mean squared difference is at most this share of the profile's variance."""
 
 
+ACROSS_REACH = _MATCH_ROWS + int(math.ceil(_MATCH_SHIFT)) + 2
+"""Rows (either way) whose pixels :func:`across_gap` may read for one pixel's row."""
+
+
 def across_gap(
     rgb: np.ndarray, source: np.ndarray, rows: np.ndarray, cols: np.ndarray, left: np.ndarray, right: np.ndarray,
 ) -> Tuple[np.ndarray, np.ndarray]:

@@ -92,7 +92,7 @@ from ..geometry.camera_range import (
 from ..io.images import to_uint8
 from ..threads import beside, halves
 from ._fill import (
-    LinearFit, across_gap, anchored, box_clusters, continue_at, cross_median, extrapolate, local_linear_fit,
+    ACROSS_REACH as _ACROSS_REACH, LinearFit, across_gap, anchored, box_clusters, continue_at, cross_median, extrapolate, local_linear_fit,
     nearest_index, push_pull, ring_min, scan_nearest, split_fit, torn_regions,
 )
 
@@ -771,7 +771,7 @@ def _nearest_surface(
     return out, np.clip(rgb, 0.0, 1.0).astype(np.float32)
 
 
-_MIX_FIT = 0.05
+_MIX_FIT = 0.15
 """A row (column) beside the recoloured ones is taken for an anti-aliased crease where the two surfaces'
 mix explains the gap's sides up to this share of their neighbours' difference (squared)."""
 
@@ -791,7 +791,9 @@ def _follow_isophotes(
     mixtures of the two.
     Where the gap's sides show such a mix (their pixel there lies between its two neighbours across
     the crease, up to ``_MIX_FIT``), the pixel takes the same mix of its own colour (the nearest
-    source's surface continued) and its recoloured neighbour's."""
+    source's surface continued) and of the recoloured surface's share, which follows the isophotes
+    across the gap as the recoloured rows do (the sides' crease pixels less their other share,
+    matched with those rows); where that share finds no match, its recoloured neighbour's colour."""
     acc = np.zeros(rgb.shape)
     total = np.zeros(len(br))
     h, w = source.shape
@@ -809,7 +811,7 @@ def _follow_isophotes(
         for sign in (1, -1):
             edge = pair & np.isin(key + sign * step, key[sel])
             if edge.any():
-                edges.append((a, b, sign, edge))
+                edges.append((a, b, sign, edge, sel))
         if a == 0:  # left / right: along the rows
             col, ok = across_gap(rgbc, source, br[sel], bc[sel], cand[a, sel, 1], cand[b, sel, 1])
             gap = cand[b, sel, 1] - cand[a, sel, 1]
@@ -826,7 +828,7 @@ def _follow_isophotes(
     index = np.full(source.shape, -1, np.int64)
     index[br, bc] = np.arange(len(br))
     src_r, src_c = np.nonzero(source)  # ``nearest`` indexes these
-    for a, b, sign, edge in edges:
+    for a, b, sign, edge, sel in edges:
         # a row (column) between the same two sides next to the recoloured ones: where the surface
         # meets the nearest source's (a crease), its pixels are anti-aliased mixtures of the two;
         # the mix is measured on the gap's two sides and applied to the two colours beside the pixel
@@ -859,7 +861,30 @@ def _follow_isophotes(
                    for ok, v, v_in, v_out in sides)
         usable &= miss <= _MIX_FIT * den
         k, alpha, inner = k[usable], alpha[usable], inner[usable]
-        rgb[k] = alpha * rgb[k] + (1.0 - alpha) * rgb[inner]
+        other = rgb[inner]
+        if k.size:
+            # the crease row's share of the recoloured surface, followed along its isophotes as well: the
+            # sides' crease pixels less their other share, matched with the recoloured rows
+            part = rgbc.copy()
+            for side in (a, b):
+                sr, sc = cand[side, k, 0], cand[side, k, 1]
+                part[sr, sc] = (rgbc[sr, sc] - alpha * rgbc[sr - dr, sc - dc]) / np.maximum(1.0 - alpha, 0.1)
+            # the recoloured rows (columns) within the profiles' reach of the crease, and the crease
+            line = br if a == 0 else bc
+            reach = np.zeros(max(h, w) + 1, bool)
+            for at_line in np.unique(line[k]):
+                reach[max(0, at_line - _ACROSS_REACH):at_line + _ACROSS_REACH + 1] = True
+            pix = sel & reach[line]
+            pix[k] = True
+            if a == 0:
+                col, ok = across_gap(part, source, br[pix], bc[pix], cand[a, pix, 1], cand[b, pix, 1])
+            else:
+                col, ok = across_gap(part.transpose(1, 0, 2), source.T, bc[pix], br[pix], cand[a, pix, 0],
+                                     cand[b, pix, 0])
+            at = np.cumsum(pix) - 1  # row of each pixel of ``pix`` in the results
+            good = ok[at[k]] & (alpha[:, 0] < 0.9)
+            other = np.where(good[:, None], np.clip(col[at[k]], 0.0, 1.0), other)
+        rgb[k] = alpha * rgb[k] + (1.0 - alpha) * other
 
 
 def _edges_near_frame(fg: np.ndarray, pad: int) -> bool:
