@@ -39,7 +39,7 @@ SHORTCUTS: Tuple[Tuple[str, str], ...] = (
     ("right-drag / shift-drag", "pan"),
     ("wheel up / down, + / -, PgUp / PgDn", "move forwards / backwards"),
     ("double-click, R", "reset the view"),
-    ("arrow keys", "orbit in 1-degree steps"),
+    ("arrow keys", "orbit (an eighth of the range a step)"),
     ("O / S / D", "open photo / style / depth file"),
     ("M", "open the bundled sample"),
     ("T", "stylized / original"),
