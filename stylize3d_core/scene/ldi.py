@@ -767,18 +767,21 @@ def _nearest_surface(
         fb = extrapolate(col_fit, nearest, source, s.max_colour_step, rest)
         rgb[~found] = fb[br[~found], bc[~found]]
     if rgbc is not None:
-        _follow_isophotes(rgb, rgbc, source, br, bc, cand, agree, found, nearest)
+        _follow_isophotes(rgb, rgbc, source, br, bc, cand, agree, found, nearest, ndc, s.disparity_jump)
     return out, np.clip(rgb, 0.0, 1.0).astype(np.float32)
 
 
 _MIX_FIT = 0.15
 """A row (column) beside the recoloured ones is taken for an anti-aliased crease where the two surfaces'
-mix explains the gap's sides up to this share of their neighbours' difference (squared)."""
+mix explains the gap's sides up to this share of their neighbours' difference (squared) ..."""
+_CREASE_KINK = 0.05
+"""... and where the disparity across it on the gap's sides bends by more than this many ``disparity_jump``
+(a crease: the disparity is affine on each plane, so one receding plane is no crease)."""
 
 
 def _follow_isophotes(
     rgb: np.ndarray, rgbc: np.ndarray, source: np.ndarray, br: np.ndarray, bc: np.ndarray, cand: np.ndarray,
-    agree: np.ndarray, found: np.ndarray, nearest: np.ndarray,
+    agree: np.ndarray, found: np.ndarray, nearest: np.ndarray, ndc: np.ndarray, jump: float,
 ) -> None:
     """Recolour, in place, the band pixels (``br``, ``bc``) that take a surface their row's or column's
     agreeing pair continues (``found``): with the colours where the texture's isophotes through them
@@ -790,7 +793,7 @@ def _follow_isophotes(
     that source's surface and the recoloured one (a wall above a ground): its pixels are anti-aliased
     mixtures of the two.
     Where the gap's sides show such a mix (their pixel there lies between its two neighbours across
-    the crease, up to ``_MIX_FIT``), the pixel takes the same mix of its own colour (the nearest
+    the crease, up to ``_MIX_FIT``, and their disparity bends there, ``_CREASE_KINK``), the pixel takes the same mix of its own colour (the nearest
     source's surface continued) and of the recoloured surface's share, which follows the isophotes
     across the gap as the recoloured rows do (the sides' crease pixels less their other share,
     matched with those rows); where that share finds no match, its recoloured neighbour's colour."""
@@ -851,6 +854,8 @@ def _follow_isophotes(
             ok = inside & source[ir, ic] & source[orow, ocol]
             v, v_in, v_out = rgbc[sr, sc], rgbc[ir, ic], rgbc[orow, ocol]
             sides.append((ok, v, v_in, v_out))
+            # the disparity is affine on a plane: a crease between two shows as a kink
+            ok &= np.abs(ndc[orow, ocol] - 2.0 * ndc[sr, sc] + ndc[ir, ic]) > _CREASE_KINK * jump
             num += np.where(ok, ((v - v_in) * (v_out - v_in)).sum(axis=1), 0.0)
             den += np.where(ok, ((v_out - v_in) ** 2).sum(axis=1), 0.0)
             usable &= ok
