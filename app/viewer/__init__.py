@@ -7,7 +7,8 @@
                      [--test-script steps.json --test-report report.json]
 
 Modules: :mod:`.orbit` (camera math), :mod:`.state` (view state, preview sizes,
-typed paths), :mod:`.render_state` (when the view needs which frame),
+typed paths), :mod:`.render_state` (when the view needs which frame), :mod:`.backend` (the
+graphics back end that draws the window),
 :mod:`.settings` (recent files, kept between runs), :mod:`.worker` (the compute
 thread), :mod:`.session` (3D photo, model, renders, export), :mod:`.panel`,
 :mod:`.window` and :mod:`.actions` (widgets, the window and its controllers, main
