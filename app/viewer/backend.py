@@ -6,10 +6,11 @@ Filament's *Vulkan* back end. On such a machine each redraw of the window costs
 several times what the same redraw costs through llvmpipe's OpenGL, and Open3D
 redraws the whole window for every mouse-motion event, so the software Vulkan
 path left the render worker a fraction of a core while dragging
-(``bench_viewer.py --window`` on a 2-core machine: 8.7 frames shown per second
-through Vulkan, 18.7 through OpenGL, the same drags; GUI-loop turns p90 94 ms
-against 19 ms). On a machine with a GPU Filament's own default on Linux is OpenGL
-too, so choosing it is what such a desktop gets anyway.
+(``bench_viewer.py --window`` on a quiet 2-core machine, the back ends
+alternating: 28.3-32.6 frames shown per second while dragging through OpenGL,
+11.7-15.3 through Vulkan; GUI-loop turns p90 18-19 ms against 90-159 ms). With a
+GPU either back end redraws quickly; ``--render-backend auto`` restores Open3D's
+own choice.
 
 Open3D's Python API does not expose the choice
 (``open3d::visualization::rendering::EngineInstance::SelectBackend``, a C++
@@ -84,7 +85,7 @@ def select_backend(choice: str) -> str:
     """
     value = BACKENDS[choice]
     if choice == "auto":
-        return "auto (Open3D's choice)"
+        return choice
     lib_path = open3d_library()
     if lib_path is None:
         return f"{choice} not selectable (no libOpen3D found); Open3D's choice kept"
