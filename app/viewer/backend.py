@@ -12,6 +12,11 @@ alternating: 28.3-32.6 frames shown per second while dragging through OpenGL,
 GPU either back end redraws quickly; ``--render-backend auto`` restores Open3D's
 own choice.
 
+OpenGL on X needs the server's GLX extension; where the display lacks it (some
+VNC or nested X servers) Filament cannot create an OpenGL engine, so
+:func:`select_backend` asks the X server first (:func:`glx_on_display`) and keeps
+Open3D's choice (Vulkan, which needs no GLX) there.
+
 Open3D's Python API does not expose the choice
 (``open3d::visualization::rendering::EngineInstance::SelectBackend``, a C++
 static function), so :func:`select_backend` calls the exported function through
@@ -33,6 +38,7 @@ Headless: nothing here imports Open3D's GUI; :func:`select_backend` and
 from __future__ import annotations
 
 import ctypes
+import ctypes.util
 import os
 from pathlib import Path
 from typing import Any, Dict, Optional
@@ -76,16 +82,41 @@ def open3d_library() -> Optional[Path]:
     return found[0] if found else None
 
 
+def glx_on_display(display: Optional[str] = None) -> Optional[bool]:
+    """Whether the X display ``display`` (default ``$DISPLAY``) has the GLX extension (OpenGL on X); None
+    where that cannot be asked (no display named, libX11 missing, the display does not open)."""
+    name = display if display is not None else os.environ.get("DISPLAY")
+    path = ctypes.util.find_library("X11")
+    if not name or not path:
+        return None
+    lx = ctypes.CDLL(path)
+    lx.XOpenDisplay.restype = ctypes.c_void_p
+    lx.XOpenDisplay.argtypes = [ctypes.c_char_p]
+    lx.XQueryExtension.argtypes = [ctypes.c_void_p, ctypes.c_char_p] + [ctypes.POINTER(ctypes.c_int)] * 3
+    lx.XCloseDisplay.argtypes = [ctypes.c_void_p]
+    dpy = lx.XOpenDisplay(name.encode())
+    if not dpy:
+        return None
+    try:
+        codes = [ctypes.c_int() for _ in range(3)]
+        return bool(lx.XQueryExtension(dpy, b"GLX", *(ctypes.byref(c) for c in codes)))
+    finally:
+        lx.XCloseDisplay(dpy)
+
+
 def select_backend(choice: str) -> str:
     """Ask Filament for ``choice`` (a key of :data:`BACKENDS`) before the GUI starts; returns what happened.
 
     Call it before ``gui.Application.instance.initialize()``: the engine is created once, with the back end
-    selected then. ``auto`` leaves Open3D's own choice. Never raises for a missing library or function
-    (another Open3D build): the returned text says the default is kept.
+    selected then. ``auto`` leaves Open3D's own choice, and so does ``opengl`` on an X display without GLX.
+    Never raises for a missing library or function (another Open3D build): the returned text says the
+    default is kept.
     """
     value = BACKENDS[choice]
     if choice == "auto":
         return choice
+    if choice == "opengl" and glx_on_display() is False:
+        return "opengl not available (the X display has no GLX); Open3D's choice kept"
     lib_path = open3d_library()
     if lib_path is None:
         return f"{choice} not selectable (no libOpen3D found); Open3D's choice kept"
@@ -118,5 +149,5 @@ def widget_image(rgb: np.ndarray) -> Any:
     return o3d.geometry.Image(np.ascontiguousarray(rgb[::-1] if _flip_rows else rgb))
 
 
-__all__ = ["BACKENDS", "DEFAULT_BACKEND", "ENV_VAR", "backend_choice", "open3d_library", "rows_flipped",
-           "select_backend", "widget_image"]
+__all__ = ["BACKENDS", "DEFAULT_BACKEND", "ENV_VAR", "backend_choice", "glx_on_display", "open3d_library",
+           "rows_flipped", "select_backend", "widget_image"]

@@ -15,19 +15,20 @@ import select
 import shutil
 import subprocess
 import time
-from typing import Optional, Tuple
+from typing import Optional, Sequence, Tuple
 
 
-def start_xvfb(screen: Tuple[int, int] = (1280, 800),
-               timeout_s: float = 20.0) -> Optional[Tuple[subprocess.Popen, str]]:
-    """(process, ":N") of a new Xvfb with one ``screen`` (width, height) x 24 bits, or None when Xvfb is not
-    installed or reports no display number within ``timeout_s`` (it is killed then). The caller terminates it."""
+def start_xvfb(screen: Tuple[int, int] = (1280, 800), timeout_s: float = 20.0,
+               extra_args: Sequence[str] = ()) -> Optional[Tuple[subprocess.Popen, str]]:
+    """(process, ":N") of a new Xvfb with one ``screen`` (width, height) x 24 bits and ``extra_args`` (e.g.
+    ``("-extension", "GLX")``: a server without OpenGL), or None when Xvfb is not installed or reports no
+    display number within ``timeout_s`` (it is killed then). The caller terminates it."""
     xvfb = shutil.which("Xvfb")
     if xvfb is None:
         return None
     r, w = os.pipe()
     proc = subprocess.Popen([xvfb, "-displayfd", str(w), "-screen", "0", f"{screen[0]}x{screen[1]}x24",
-                             "-nolisten", "tcp"], pass_fds=(w,), stdout=subprocess.DEVNULL,
+                             "-nolisten", "tcp", *extra_args], pass_fds=(w,), stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
     os.close(w)
     number = b""

@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import ctypes
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -60,3 +63,34 @@ def test_widget_images_are_flipped_only_under_opengl(monkeypatch):
     assert np.array_equal(np.asarray(backend.widget_image(rgb)), rgb[::-1])
     view = rgb[:, ::-1]  # a non-contiguous view is copied, not refused
     assert np.array_equal(np.asarray(backend.widget_image(view)), view[::-1])
+
+
+def test_glx_is_asked_of_the_x_server_and_opengl_falls_back_without_it(monkeypatch):
+    """An X server without GLX (Xvfb -extension GLX) cannot run an OpenGL engine: the choice falls back to
+    Open3D's own (Vulkan), and the window still opens there (checked in a subprocess that opens one)."""
+    from app.viewer.xserver import start_xvfb
+
+    assert backend.glx_on_display("") is None  # no display named: unknown
+    servers = [start_xvfb((640, 480)), start_xvfb((640, 480), extra_args=("-extension", "GLX"))]
+    try:
+        if any(s is None for s in servers):
+            pytest.skip("Xvfb is not installed or did not start")
+        (_, with_glx), (_, without) = servers
+        assert backend.glx_on_display(with_glx) is True
+        assert backend.glx_on_display(without) is False
+        monkeypatch.setenv("DISPLAY", without)
+        monkeypatch.setattr(backend, "_flip_rows", False)
+        assert "no GLX" in backend.select_backend("opengl") and not backend.rows_flipped()
+        code = ("from app.viewer.backend import select_backend\n"
+                "print(select_backend('opengl'))\n"
+                "import open3d.visualization.gui as gui\n"
+                "app = gui.Application.instance; app.initialize()\n"
+                "w = app.create_window('t', 200, 100); app.run_one_tick(); w.close(); print('opened')\n")
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                             env={**os.environ, "DISPLAY": without})
+        assert "no GLX" in out.stdout and "opened" in out.stdout, out.stdout + out.stderr
+    finally:
+        for server in servers:
+            if server is not None:
+                server[0].terminate()
+                server[0].wait(timeout=10)
