@@ -65,3 +65,29 @@ def test_beside_runs_in_another_thread_and_halves_runs_every_job():
         raise AssertionError("the exception was lost")
     except ZeroDivisionError:
         pass
+
+
+def test_torch_threads_sets_the_count_for_the_block_and_restores_it():
+    before = torch.get_num_threads()
+    try:
+        torch.set_num_threads(1)
+        with threads.torch_threads(2) as n:
+            assert n == 2 and torch.get_num_threads() == 2
+        assert torch.get_num_threads() == 1
+        with threads.torch_threads(None) as n:  # unchanged
+            assert n == 1 and torch.get_num_threads() == 1
+        try:
+            with threads.torch_threads(2):
+                raise KeyError("inside")
+        except KeyError:
+            pass
+        assert torch.get_num_threads() == 1  # restored after an error too
+        try:
+            with threads.torch_threads(0):
+                pass
+        except ValueError as e:
+            assert "n >= 1" in str(e)
+        else:
+            raise AssertionError("0 threads accepted")
+    finally:
+        torch.set_num_threads(before)

@@ -3,7 +3,7 @@
     stylize3d-viewer [PHOTO] [--style STYLE] [--depth SPEC] [--refine-depth METHOD]
                      [--model CHECKPOINT | --no-model]
                      [--max-size 640] [--fov DEG] [--strength 1] [--threads 1] [--size 1280x800] [--invert-wheel]
-                     [--render-backend opengl|vulkan|auto]
+                     [--full-threads N] [--render-backend opengl|vulkan|auto]
                      [--test-script steps.json --test-report report.json]
 
 Modules: :mod:`.orbit` (camera math), :mod:`.state` (view state, preview sizes,
@@ -60,6 +60,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--threads", type=int, default=1,
                    help="torch threads of the compute worker (default 1: on a 2-core machine the other core "
                         "draws the window; more threads only help on an otherwise idle machine with more cores)")
+    p.add_argument("--full-threads", type=int, default=None,
+                   help="torch threads of the view's full-quality frames, rendered once the camera rests and the "
+                        "window no longer redraws (default: one less than the cores where there are 3 or more, "
+                        "else 1)")
     p.add_argument("--invert-wheel", action="store_true",
                    help="wheel up moves backwards (default: wheel up moves forwards, as in common 3D viewers)")
     p.add_argument("--render-backend", default=None, choices=sorted(BACKENDS),
@@ -70,6 +74,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--test-script", default=None, metavar="JSON", help="run these test steps (see app/viewer/script.py)")
     p.add_argument("--test-report", default=None, metavar="JSON", help="where the test script writes its report")
     return p
+
+
+def default_full_threads(cores: int) -> int:
+    """Torch threads of the view's full-quality frames on a machine of ``cores`` (torch's default count):
+    one less than the cores where there are 3 or more (the window and the rest of the desktop keep one),
+    else 1. On 2 cores a second thread made a 768x512 full frame 1.38 -> 1.0-1.16 s on a quiet machine but
+    4-18 s where another process's OpenMP threads spun on the other core (``bench_viewer --window``)."""
+    return max(1, int(cores) - 1) if int(cores) >= 3 else 1
 
 
 GUI_SWITCH_INTERVAL_S = 0.0005
@@ -91,9 +103,10 @@ def main(argv: Optional[List[str]] = None) -> int:
     except InputError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
-    if args.threads < 1:
-        print(f"{PROG}: --threads must be >= 1, got {args.threads}", file=sys.stderr)
-        return 2
+    for flag, value in (("--threads", args.threads), ("--full-threads", args.full_threads)):
+        if value is not None and value < 1:
+            print(f"{PROG}: {flag} must be >= 1, got {value}", file=sys.stderr)
+            return 2
     try:
         backend = backend_choice(args.render_backend)
     except ValueError as e:
@@ -109,6 +122,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     import open3d.visualization.gui as gui
     import torch
 
+    full_threads = args.full_threads or default_full_threads(torch.get_num_threads())  # torch's default: the cores
     torch.set_num_threads(args.threads)
     # The compute worker runs Python between its torch calls; with the default 5 ms switch interval every
     # GUI callback (mouse moves, ticks, frames handed over) could wait that long for the GIL, several times per
@@ -130,7 +144,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     app.initialize()
     viewer = ViewerWindow(ViewerOptions(spec=spec, style=args.style, model=model, use_model=not args.no_model,
                                         strength=args.strength, width=width, height=height,
-                                        invert_wheel=args.invert_wheel))
+                                        invert_wheel=args.invert_wheel, full_threads=full_threads))
     import signal  # SIGINT / SIGTERM close the window like its close button (handled at the next GUI callback)
 
     received: List[int] = []
@@ -158,4 +172,4 @@ def entrypoint() -> None:
     sys.exit(main())
 
 
-__all__ = ["entrypoint", "main", "build_parser"]
+__all__ = ["entrypoint", "main", "build_parser", "default_full_threads"]

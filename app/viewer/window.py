@@ -43,6 +43,7 @@ from stylize3d_core.defaults import DEFAULT_STRENGTH
 from stylize3d_core.errors import InputError
 from stylize3d_core.pipeline import PhotoSpec
 from stylize3d_core.render.plain import frame_size
+from stylize3d_core.threads import torch_threads
 
 from . import panel as P
 from .actions import CameraPathController, ExportController, PhotoController, ui_callback
@@ -81,6 +82,7 @@ class ViewerOptions:
         width, height: window size in pixels.
         invert_wheel: wheel up moves backwards (default False: wheel up moves forwards, as in common
             3D viewers).
+        full_threads: torch threads of the view's full-quality frames (None: the worker's own count).
     """
 
     spec: PhotoSpec = PhotoSpec(max_size=VIEWER_MAX_SIZE)
@@ -91,6 +93,7 @@ class ViewerOptions:
     width: int = 1280
     height: int = 800
     invert_wheel: bool = False
+    full_threads: Optional[int] = None
 
 
 class ViewerWindow:
@@ -532,13 +535,15 @@ class ViewerWindow:
         session = self.session
         cancel = None if preview or camera is not None else threading.Event()
         stop = None if cancel is None else cancel.is_set
+        threads = None if preview else self.options.full_threads
         requested = time.perf_counter()
 
         def render() -> Tuple[ViewFrame, o3d.geometry.Image, Dict[str, float]]:  # (on the worker)
             started = time.perf_counter()
             times: Dict[str, float] = {"requested": requested, "wait": started - requested}
-            frame = session.render_view(cam, size, None, preview=preview, stylized=stylized, should_stop=stop,
-                                        split=split, calibrate=scale >= 1.0, timings=times)
+            with torch_threads(threads):
+                frame = session.render_view(cam, size, None, preview=preview, stylized=stylized, should_stop=stop,
+                                            split=split, calibrate=scale >= 1.0, timings=times)
             t = time.perf_counter()
             image = widget_image(frame.image)  # the GUI thread only hands it to the widget
             times["image"] = time.perf_counter() - t

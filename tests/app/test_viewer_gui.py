@@ -229,7 +229,8 @@ def test_stylized_view_strength_style_export_and_no_freeze(display, tmp_path, un
         {"op": "state"},
         {"op": "quit"},
     ]
-    code, report = run_viewer(display, tmp_path, steps, ["--model", str(untrained)])
+    # full frames on 2 threads (the default on 3 or more cores)
+    code, report = run_viewer(display, tmp_path, steps, ["--model", str(untrained), "--full-threads", "2"])
     check_ran(code, report)
     assert step(report, "wait_idle", 0)["result"]["shown"]["stylized"] is True
     assert step(report, "wait_idle", 4)["result"]["shown"]["stylized"] is False

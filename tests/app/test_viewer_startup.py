@@ -1,4 +1,5 @@
-"""The viewer's choice of Filament back end (app/viewer/backend.py): parsing, the library hook, image rows."""
+"""The viewer's start-up choices: the Filament back end (app/viewer/backend.py: parsing, the library hook, GLX,
+image rows) and the torch threads of full frames."""
 
 from __future__ import annotations
 
@@ -94,3 +95,11 @@ def test_glx_is_asked_of_the_x_server_and_opengl_falls_back_without_it(monkeypat
             if server is not None:
                 server[0].terminate()
                 server[0].wait(timeout=10)
+
+
+def test_full_frames_use_all_but_one_core_from_three_cores_and_bad_counts_are_refused(capsys):
+    from app.viewer import default_full_threads
+
+    assert [default_full_threads(n) for n in (1, 2, 3, 4, 16)] == [1, 1, 2, 3, 15]
+    assert main(["--full-threads", "0", "--no-model"]) == 2
+    assert "--full-threads must be >= 1" in capsys.readouterr().err
