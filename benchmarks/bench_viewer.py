@@ -479,7 +479,8 @@ def window(model: str, megapixels: float, tmp: str, max_size: int, repeats: int,
     print(f"  where the time goes (medians): preview render {1000 * med(stats['preview_seconds']):.0f} ms on the worker, "
           f"worker -> GUI thread hand-over {1000 * med(stats['post_delay']):.0f} ms, request -> shown "
           f"{1000 * med(stats['preview_latency']):.0f} ms; {len(stats['drag_moves'])} mouse moves received "
-          f"of {sum(int(drag_s * 60) for _ in drags)} sent")
+          f"of {sum(int(drag_s * 60) for _ in drags)} sent, {len(stats.get('drag_clamped', []))} of them at the "
+          f"camera range's limit (no new view: frames shown while dragging count only moving time when this is 0)")
     log = [dict(zip(FRAME_LOG, row)) for row in stats.get("frame_log", [])]
     if os.environ.get("STYLIZE3D_BENCH_FRAME_LOG"):  # every frame shown, for a closer look
         Path(os.environ["STYLIZE3D_BENCH_FRAME_LOG"]).write_text(json.dumps(log))

@@ -126,7 +126,7 @@ class ViewerWindow:
         self.errors: List[str] = []
         self.stats: Dict[str, Any] = {"preview_seconds": [], "full_seconds": [], "full_latency": [], "preview_shown": [],
                                       "preview_latency": [], "post_delay": [], "mouse_down": [],
-                                      "drag_moves": [], "full_shown": [], "level_seconds": [], "level_shown": [],
+                                      "drag_moves": [], "drag_clamped": [], "full_shown": [], "level_seconds": [], "level_shown": [],
                                       "colour_jump": [], "preview_sides": [], "level_sizes": [], "full_sizes": [],
                                       "interrupted": [], "drag_ticks": [], "frame_log": [], "mouse_cb": [],
                                       "tick_gap_frame": [], "tick_gap": [], "threads": {}}
@@ -737,6 +737,8 @@ class ViewerWindow:
         if pose != self.state.pose:
             self.state = replace(self.state, pose=pose)
             self.view_changed()
+        else:  # at the range's limit: nothing new to show (the bench reports how often)
+            self.stats["drag_clamped"].append(time.monotonic())
 
     def wheel(self, ticks: float) -> None:
         """Move forwards by ``ticks`` wheel steps (negative: backwards)."""

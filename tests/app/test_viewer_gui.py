@@ -310,6 +310,7 @@ def test_real_mouse_drag_and_key_press(display, tmp_path):
     # 100 px of drag turn half the photo's yaw range (200 px reach the limit, whatever the range)
     assert yaw == pytest.approx(100 * limits["deg_per_pixel"], rel=0.3), f"the mouse drag did not orbit (yaw {yaw})"
     assert 0.3 * limits["max_yaw_deg"] < yaw < limits["max_yaw_deg"], "the drag was clamped: speeds not relative to the range"
+    assert report["stats"]["drag_clamped"] == [], "mouse moves of a 100 px drag met the range's limit"
     assert np.abs(pixels(tmp_path / "after.png") - pixels(tmp_path / "before.png")).mean() > 5
     assert step(report, "state", 1)["result"]["pose"]["yaw_deg"] == 0.0, "the R key did not reset the view"
 
