@@ -43,6 +43,7 @@ import torch
 from ..eval.timing import median_time
 from ..models.decoder import native_bfloat16
 from ..render import rasterize_fast
+from ..threads import torch_threads
 from .report import pareto_front, scatter_plot, write_table
 
 Log = Callable[[str], None]
@@ -240,10 +241,8 @@ class VariantRun:
         self.s = self._stack.enter_context(self.scene.stylized(v.supersample, v.preview_points_per_pixel or 3.0,
                                                                v.decode_scale, v.final_points_per_pixel,
                                                                v.bf16_decoder))
-        self._threads = torch.get_num_threads()
+        self._stack.enter_context(torch_threads(v.threads))  # restored when the stack closes
         self._config = self.s.model.decoder.config
-        if v.threads is not None:
-            torch.set_num_threads(v.threads)
         if v.channels_first:
             self.s.model.decoder.config = replace(self._config, channels_last=False)
             self.s.model.decoder.to(memory_format=torch.contiguous_format)
@@ -255,7 +254,6 @@ class VariantRun:
     def __exit__(self, *exc) -> None:
         rasterize_fast.ENABLED = self._compiled
         decoder, config = self.s.model.decoder, self._config
-        torch.set_num_threads(self._threads)
         if self.v.channels_first:
             decoder.config = config
             decoder.to(memory_format=torch.channels_last if config.channels_last else torch.contiguous_format)

@@ -47,6 +47,7 @@ from ..io.atomic import atomic_path
 from ..models.scene_geometry import NeighbourhoodConfig, PointHierarchy, SceneGeometry
 from ..points import IDWWeights
 from ..scene.pointcloud import PointTensors
+from ..threads import torch_threads
 from .data import KINDS, DataConfig, TrainSample, from_u8, held_out_config, make_sample
 
 SAMPLE_FORMAT = "stylize3d-train-sample"
@@ -285,9 +286,7 @@ def build_dataset(
         stale.unlink()
     t0 = time.perf_counter()
     generated, skipped, regenerated = 0, 0, []
-    previous_threads = torch.get_num_threads()
-    torch.set_num_threads(max(1, int(threads)))
-    try:
+    with torch_threads(max(1, int(threads))):
         for i in range(n_samples):
             path = sample_path(root, i)
             if path.exists():
@@ -303,8 +302,6 @@ def build_dataset(
             save_sample(path, make_sample(i, config, seed), key)
             if progress:
                 progress(i + 1, n_samples)
-    finally:
-        torch.set_num_threads(previous_threads)
     return BuildReport(root, generated, skipped, tuple(regenerated), time.perf_counter() - t0)
 
 
