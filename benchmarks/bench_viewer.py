@@ -551,7 +551,7 @@ def main() -> None:
     parser.add_argument("--save-report", default=None, metavar="JSON",
                         help="--window: write the window's report (its frame log, GUI-loop turns) and the drags here")
     parser.add_argument("--render-backend", default=None, choices=sorted(BACKENDS),
-                        help="--window: the viewer's graphics back end (default: the viewer's, opengl)")
+                        help="--window: the viewer's graphics back end (default: the viewer's, auto)")
     parser.add_argument("--megapixels", type=float, default=1.0, help="photo size of --interactive and --window "
                         "(default 1 MP)")
     parser.add_argument("--repeats", type=int, default=2, help="drag pairs per settings in --interactive (default 2)")

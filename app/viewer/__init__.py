@@ -68,8 +68,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="wheel up moves backwards (default: wheel up moves forwards, as in common 3D viewers)")
     p.add_argument("--render-backend", default=None, choices=sorted(BACKENDS),
                    help=f"graphics back end that draws the window (default {DEFAULT_BACKEND}, or "
-                        f"${ENV_VAR}; auto: Open3D's choice, Vulkan on a software-only Vulkan device, "
-                        "whose redraws cost several times OpenGL's: see app/viewer/backend.py)")
+                        f"${ENV_VAR}; auto: Open3D's choice, Vulkan where the only Vulkan device is the "
+                        "software llvmpipe; opengl there doubled the frames shown while dragging: see "
+                        "app/viewer/backend.py)")
     p.add_argument("--size", default="1280x800", metavar="WxH", help="window size in pixels (default 1280x800)")
     p.add_argument("--test-script", default=None, metavar="JSON", help="run these test steps (see app/viewer/script.py)")
     p.add_argument("--test-report", default=None, metavar="JSON", help="where the test script writes its report")

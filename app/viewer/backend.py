@@ -1,20 +1,20 @@
-"""Which of Filament's graphics back ends draws the viewer window (OpenGL by default).
+"""Which of Filament's graphics back ends draws the viewer window (Open3D's own choice by default; OpenGL on request).
 
 Open3D 0.20 draws its GUI with Filament, and where the only Vulkan device is a
 software one (Mesa's llvmpipe: no GPU, Xvfb, a remote desktop) it picks
-Filament's *Vulkan* back end. On such a machine each redraw of the window costs
-several times what the same redraw costs through llvmpipe's OpenGL, and Open3D
-redraws the whole window for every mouse-motion event, so the software Vulkan
-path left the render worker a fraction of a core while dragging
-(``bench_viewer.py --window`` on a quiet 2-core machine, the back ends
-alternating: 28.3-32.6 frames shown per second while dragging through OpenGL,
-11.7-15.3 through Vulkan; GUI-loop turns p90 18-19 ms against 90-159 ms). With a
-GPU either back end redraws quickly; ``--render-backend auto`` restores Open3D's
-own choice.
+Filament's *Vulkan* back end. Open3D redraws the whole window at every turn of
+its loop that had a mouse move, and through llvmpipe's Vulkan those turns were
+slower and far more uneven than through its OpenGL, leaving the render worker
+less of the CPU while dragging (``bench_viewer.py --window`` on a quiet 2-core
+machine, the back ends alternating: 28.3-32.6 frames shown per second while
+dragging through OpenGL, 11.7-15.3 through Vulkan; GUI-loop turns median 13 ms
+against 16-19 ms, p90 18-19 ms against 90-159 ms). ``--render-backend opengl``
+(or ``$STYLIZE3D_RENDER_BACKEND=opengl``) selects it; :data:`DEFAULT_BACKEND` says
+why it is not the default yet.
 
 OpenGL on X needs the server's GLX extension; where the display lacks it (some
 VNC or nested X servers) Filament cannot create an OpenGL engine, so
-:func:`select_backend` asks the X server first (:func:`glx_on_display`) and keeps
+:func:`select_backend` asks the X server first (``xserver.has_extension``) and keeps
 Open3D's choice (Vulkan, which needs no GLX) there.
 
 Open3D's Python API does not expose the choice
@@ -38,18 +38,23 @@ Headless: nothing here imports Open3D's GUI; :func:`select_backend` and
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 import os
 from pathlib import Path
 from typing import Any, Dict, Optional
 
 import numpy as np
 
+from .xserver import has_extension
+
 BACKENDS: Dict[str, int] = {"auto": 0, "opengl": 1, "vulkan": 2}
 """``--render-backend`` choices and their ``EngineInstance::RenderingType`` values (``auto``: Open3D's own
 choice, which is Vulkan on a software Vulkan device)."""
 
-DEFAULT_BACKEND = "opengl"
+DEFAULT_BACKEND = "auto"
+"""Open3D's own choice. OpenGL drags at twice the frame rate on a software renderer (the module docstring) but
+is not the default yet: in ~1 of 10 window-test runs under it the view was laid out a few pixels wide (a
+32x22 screenshot; a real drag then missed the view), which a relayout on a changed content rect made rarer,
+not gone; under Vulkan none in the same runs."""
 
 ENV_VAR = "STYLIZE3D_RENDER_BACKEND"
 """Environment variable that sets the back end when ``--render-backend`` is not given (benchmarks, tests)."""
@@ -77,31 +82,8 @@ def open3d_library() -> Optional[Path]:
     """The path of Open3D's shared library (``libOpen3D.so.*`` beside the ``open3d`` package), or None."""
     import open3d
 
-    folder = Path(open3d.__file__).resolve().parent
-    found = sorted(folder.glob("libOpen3D.so*")) + sorted(folder.glob("*/libOpen3D.so*"))
+    found = sorted(Path(open3d.__file__).resolve().parent.glob("libOpen3D.so*"))
     return found[0] if found else None
-
-
-def glx_on_display(display: Optional[str] = None) -> Optional[bool]:
-    """Whether the X display ``display`` (default ``$DISPLAY``) has the GLX extension (OpenGL on X); None
-    where that cannot be asked (no display named, libX11 missing, the display does not open)."""
-    name = display if display is not None else os.environ.get("DISPLAY")
-    path = ctypes.util.find_library("X11")
-    if not name or not path:
-        return None
-    lx = ctypes.CDLL(path)
-    lx.XOpenDisplay.restype = ctypes.c_void_p
-    lx.XOpenDisplay.argtypes = [ctypes.c_char_p]
-    lx.XQueryExtension.argtypes = [ctypes.c_void_p, ctypes.c_char_p] + [ctypes.POINTER(ctypes.c_int)] * 3
-    lx.XCloseDisplay.argtypes = [ctypes.c_void_p]
-    dpy = lx.XOpenDisplay(name.encode())
-    if not dpy:
-        return None
-    try:
-        codes = [ctypes.c_int() for _ in range(3)]
-        return bool(lx.XQueryExtension(dpy, b"GLX", *(ctypes.byref(c) for c in codes)))
-    finally:
-        lx.XCloseDisplay(dpy)
 
 
 def select_backend(choice: str) -> str:
@@ -115,7 +97,7 @@ def select_backend(choice: str) -> str:
     value = BACKENDS[choice]
     if choice == "auto":
         return choice
-    if choice == "opengl" and glx_on_display() is False:
+    if choice == "opengl" and has_extension(None, "GLX") is False:
         return "opengl not available (the X display has no GLX); Open3D's choice kept"
     lib_path = open3d_library()
     if lib_path is None:
@@ -136,11 +118,6 @@ _flip_rows = False
 """Whether :func:`widget_image` flips rows: set by :func:`select_backend` (the OpenGL back end selected)."""
 
 
-def rows_flipped() -> bool:
-    """Whether images for ``gui.ImageWidget`` are given upside down (the OpenGL back end; see the module doc)."""
-    return _flip_rows
-
-
 def widget_image(rgb: np.ndarray) -> Any:
     """The ``open3d.geometry.Image`` to give a ``gui.ImageWidget`` so that it shows ``rgb`` (H, W, 3) uint8
     upright: a copy with its rows reversed under the OpenGL back end, else ``rgb`` as it is (contiguous)."""
@@ -149,5 +126,5 @@ def widget_image(rgb: np.ndarray) -> Any:
     return o3d.geometry.Image(np.ascontiguousarray(rgb[::-1] if _flip_rows else rgb))
 
 
-__all__ = ["BACKENDS", "DEFAULT_BACKEND", "ENV_VAR", "backend_choice", "glx_on_display", "open3d_library",
-           "rows_flipped", "select_backend", "widget_image"]
+__all__ = ["BACKENDS", "DEFAULT_BACKEND", "ENV_VAR", "backend_choice", "open3d_library", "select_backend",
+           "widget_image"]

@@ -3,7 +3,8 @@
 Headless like the test hooks (:mod:`app.viewer.script`): nothing here imports
 Open3D. :func:`start_xvfb` starts an Xvfb that picks a free display number
 itself (``-displayfd``); :func:`xtest_libs` loads libX11 and libXtst through
-ctypes, whose ``XTestFake*Event`` calls send real mouse and key events.
+ctypes, whose ``XTestFake*Event`` calls send real mouse and key events;
+:func:`has_extension` asks a display for an extension (GLX: can it run OpenGL).
 """
 
 from __future__ import annotations
@@ -49,21 +50,49 @@ def start_xvfb(screen: Tuple[int, int] = (1280, 800), timeout_s: float = 20.0,
     return proc, f":{int(number)}"
 
 
-def xtest_libs() -> Optional[Tuple[ctypes.CDLL, ctypes.CDLL]]:
-    """(libX11, libXtst) through ctypes with the signatures of the calls used here, or None where missing."""
-    x11, xtst = ctypes.util.find_library("X11"), ctypes.util.find_library("Xtst")
-    if not x11 or not xtst:
+def x11_lib() -> Optional[ctypes.CDLL]:
+    """libX11 through ctypes with the signatures of the calls used here (opening displays, flushing, keysyms,
+    extensions), or None where it is missing."""
+    path = ctypes.util.find_library("X11")
+    if not path:
         return None
-    lx, lt = ctypes.CDLL(x11), ctypes.CDLL(xtst)
+    lx = ctypes.CDLL(path)
     lx.XOpenDisplay.restype = ctypes.c_void_p
     lx.XOpenDisplay.argtypes = [ctypes.c_char_p]
     for name in ("XFlush", "XCloseDisplay"):
         getattr(lx, name).argtypes = [ctypes.c_void_p]
-    lt.XTestFakeMotionEvent.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_ulong]
-    lt.XTestFakeButtonEvent.argtypes = [ctypes.c_void_p, ctypes.c_uint, ctypes.c_int, ctypes.c_ulong]
-    lt.XTestFakeKeyEvent.argtypes = [ctypes.c_void_p, ctypes.c_uint, ctypes.c_int, ctypes.c_ulong]
     lx.XStringToKeysym.restype = ctypes.c_ulong
     lx.XStringToKeysym.argtypes = [ctypes.c_char_p]
     lx.XKeysymToKeycode.restype = ctypes.c_ubyte
     lx.XKeysymToKeycode.argtypes = [ctypes.c_void_p, ctypes.c_ulong]
+    lx.XQueryExtension.argtypes = [ctypes.c_void_p, ctypes.c_char_p] + [ctypes.POINTER(ctypes.c_int)] * 3
+    return lx
+
+
+def xtest_libs() -> Optional[Tuple[ctypes.CDLL, ctypes.CDLL]]:
+    """(libX11, libXtst) through ctypes with the signatures of the calls used here, or None where missing."""
+    lx, xtst = x11_lib(), ctypes.util.find_library("Xtst")
+    if lx is None or not xtst:
+        return None
+    lt = ctypes.CDLL(xtst)
+    lt.XTestFakeMotionEvent.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_ulong]
+    lt.XTestFakeButtonEvent.argtypes = [ctypes.c_void_p, ctypes.c_uint, ctypes.c_int, ctypes.c_ulong]
+    lt.XTestFakeKeyEvent.argtypes = [ctypes.c_void_p, ctypes.c_uint, ctypes.c_int, ctypes.c_ulong]
     return lx, lt
+
+
+def has_extension(display: Optional[str], name: str) -> Optional[bool]:
+    """Whether the X display ``display`` (default ``$DISPLAY``) has the extension ``name`` (e.g. "GLX": OpenGL
+    on X); None where that cannot be asked (no display named, libX11 missing, the display does not open)."""
+    display = display if display is not None else os.environ.get("DISPLAY")
+    lx = x11_lib()
+    if not display or lx is None:
+        return None
+    dpy = lx.XOpenDisplay(display.encode())
+    if not dpy:
+        return None
+    try:
+        codes = [ctypes.c_int() for _ in range(3)]
+        return bool(lx.XQueryExtension(dpy, name.encode(), *(ctypes.byref(c) for c in codes)))
+    finally:
+        lx.XCloseDisplay(dpy)

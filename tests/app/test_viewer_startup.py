@@ -17,12 +17,12 @@ from app.viewer import build_parser, main
 
 def test_choice_from_the_command_line_the_environment_or_the_default(monkeypatch):
     monkeypatch.delenv(backend.ENV_VAR, raising=False)
-    assert backend.backend_choice() == backend.DEFAULT_BACKEND == "opengl"
+    assert backend.backend_choice() == backend.DEFAULT_BACKEND == "auto"
     monkeypatch.setenv(backend.ENV_VAR, " Vulkan ")
     assert backend.backend_choice() == "vulkan"
     assert backend.backend_choice("auto") == "auto"  # the command line wins over the environment
     monkeypatch.setenv(backend.ENV_VAR, "")
-    assert backend.backend_choice() == "opengl"
+    assert backend.backend_choice() == "auto"
 
 
 @pytest.mark.parametrize("cli, env, named", [("metal", None, "--render-backend"), (None, "gl", backend.ENV_VAR)])
@@ -47,13 +47,12 @@ def test_the_installed_open3d_exports_the_backend_hook():
     lib = backend.open3d_library()
     assert lib is not None and lib.name.startswith("libOpen3D.so")
     assert hasattr(ctypes.CDLL(str(lib)), backend._SELECT_BACKEND)
-    assert backend.BACKENDS == {"auto": 0, "opengl": 1, "vulkan": 2}  # RenderingType's kDefault, kOpenGL, kVulkan
 
 
 def test_auto_leaves_open3d_to_choose_and_never_flips(monkeypatch):
     monkeypatch.setattr(backend, "_flip_rows", False)
     assert backend.select_backend("auto") == "auto"
-    assert not backend.rows_flipped()
+    assert not backend._flip_rows
 
 
 def test_widget_images_are_flipped_only_under_opengl(monkeypatch):
@@ -66,30 +65,41 @@ def test_widget_images_are_flipped_only_under_opengl(monkeypatch):
     assert np.array_equal(np.asarray(backend.widget_image(view)), view[::-1])
 
 
-def test_glx_is_asked_of_the_x_server_and_opengl_falls_back_without_it(monkeypatch):
-    """An X server without GLX (Xvfb -extension GLX) cannot run an OpenGL engine: the choice falls back to
-    Open3D's own (Vulkan), and the window still opens there (checked in a subprocess that opens one)."""
-    from app.viewer.xserver import start_xvfb
+def _open_window(display: str, choice: str) -> str:
+    """stdout + stderr of a subprocess that selects ``choice`` and opens an Open3D window on ``display``
+    (Filament logs the back end it resolved; "opened" once the window ran a tick)."""
+    code = ("from app.viewer.backend import select_backend\n"
+            f"print(select_backend({choice!r}), flush=True)\n"
+            "import open3d.visualization.gui as gui\n"
+            "app = gui.Application.instance; app.initialize()\n"
+            "w = app.create_window('t', 200, 100); app.run_one_tick(); w.close(); print('opened')\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                         env={**os.environ, "DISPLAY": display})
+    return out.stdout + out.stderr
 
-    assert backend.glx_on_display("") is None  # no display named: unknown
+
+def test_the_choice_reaches_filament_and_opengl_falls_back_without_glx(monkeypatch):
+    """Each choice resolves to its Filament back end (its own log line: the RenderingType values are right).
+    An X server without GLX (Xvfb -extension GLX) cannot run an OpenGL engine: the choice falls back to
+    Open3D's own (Vulkan), and the window still opens there."""
+    from app.viewer.xserver import has_extension, start_xvfb
+
+    assert has_extension("", "GLX") is None  # no display named: unknown
     servers = [start_xvfb((640, 480)), start_xvfb((640, 480), extra_args=("-extension", "GLX"))]
     try:
         if any(s is None for s in servers):
             pytest.skip("Xvfb is not installed or did not start")
         (_, with_glx), (_, without) = servers
-        assert backend.glx_on_display(with_glx) is True
-        assert backend.glx_on_display(without) is False
+        assert has_extension(with_glx, "GLX") is True
+        assert has_extension(without, "GLX") is False
+        for choice, resolved in (("opengl", "OpenGL"), ("vulkan", "Vulkan")):
+            log = _open_window(with_glx, choice)
+            assert f"resolved backend: {resolved}" in log and "opened" in log, log
         monkeypatch.setenv("DISPLAY", without)
         monkeypatch.setattr(backend, "_flip_rows", False)
-        assert "no GLX" in backend.select_backend("opengl") and not backend.rows_flipped()
-        code = ("from app.viewer.backend import select_backend\n"
-                "print(select_backend('opengl'))\n"
-                "import open3d.visualization.gui as gui\n"
-                "app = gui.Application.instance; app.initialize()\n"
-                "w = app.create_window('t', 200, 100); app.run_one_tick(); w.close(); print('opened')\n")
-        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
-                             env={**os.environ, "DISPLAY": without})
-        assert "no GLX" in out.stdout and "opened" in out.stdout, out.stdout + out.stderr
+        assert "no GLX" in backend.select_backend("opengl") and not backend._flip_rows
+        log = _open_window(without, "opengl")
+        assert "no GLX" in log and "resolved backend: Vulkan" in log and "opened" in log, log
     finally:
         for server in servers:
             if server is not None:
