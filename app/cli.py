@@ -90,6 +90,10 @@ def _add_training(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--style-stages", default=",".join(map(str, d.style_stages)), metavar="S,S,...",
                    help="stage 2: EfficientNet stages (0-4) of the global style loss "
                         f"(default {','.join(map(str, d.style_stages))})")
+    p.add_argument("--style-crop", type=float, nargs=2, default=list(d.style_crop), metavar=("LOW", "HIGH"),
+                   help="stage 2: side of the random style crops as a fraction of the style's short side, "
+                        f"drawn in [LOW, HIGH] (default {d.style_crop[0]} {d.style_crop[1]}; smaller magnifies "
+                        "the strokes)")
 
 
 def _add_info(sub: "argparse._SubParsersAction") -> None:
@@ -207,7 +211,7 @@ def _train(args: argparse.Namespace) -> int:
         max_hours=args.hours, init=args.init, init_stylizer=args.init_stylizer, seed=args.seed,
         threads=args.threads, weights=_loss_weights(args.weight), recon_fraction=args.recon_fraction,
         teacher_dir=args.teacher, teacher_fraction=args.teacher_fraction,
-        style_stages=_stages(args.style_stages),
+        style_stages=_stages(args.style_stages), style_crop=tuple(args.style_crop),
     )
     path = train(config, log=lambda msg: print(f"{PROG}: {msg}", file=sys.stderr, flush=True))
     print(f"{PROG}: checkpoint {path}", file=sys.stderr)

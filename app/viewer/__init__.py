@@ -34,7 +34,7 @@ from stylize3d_core.pipeline import PhotoSpec
 from stylize3d_core.resources import resolve_model
 
 from ..options import add_options, from_args
-from .backend import BACKENDS, DEFAULT_BACKEND, ENV_VAR, backend_choice, select_backend
+from .backend import BACKENDS, DEFAULT_BACKEND, ENV_VAR, NoDisplayError, backend_choice, start_gui
 from .session import DEFAULT_MODEL
 from .state import VIEWER_MAX_SIZE
 
@@ -68,9 +68,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="wheel up moves backwards (default: wheel up moves forwards, as in common 3D viewers)")
     p.add_argument("--render-backend", default=None, choices=sorted(BACKENDS),
                    help=f"graphics back end that draws the window (default {DEFAULT_BACKEND}, or "
-                        f"${ENV_VAR}; auto: Open3D's choice, Vulkan where the only Vulkan device is the "
-                        "software llvmpipe; opengl there doubled the frames shown while dragging: see "
-                        "app/viewer/backend.py)")
+                        f"${ENV_VAR}; opengl needs the X server's GLX and keeps Open3D's choice without it; "
+                        "auto: Open3D's choice, Vulkan where the only Vulkan device is the software llvmpipe, "
+                        "where opengl doubled the frames shown while dragging: see app/viewer/backend.py)")
     p.add_argument("--size", default="1280x800", metavar="WxH", help="window size in pixels (default 1280x800)")
     p.add_argument("--test-script", default=None, metavar="JSON", help="run these test steps (see app/viewer/script.py)")
     p.add_argument("--test-report", default=None, metavar="JSON", help="where the test script writes its report")
@@ -139,10 +139,13 @@ def main(argv: Optional[List[str]] = None) -> int:
 
     steps = read_script(args.test_script) if args.test_script else None
     app = gui.Application.instance
-    chosen = select_backend(backend)  # before the engine exists: initialize() creates it
+    try:
+        chosen = start_gui(backend)  # the back end, then Open3D's GUI (and its engine)
+    except NoDisplayError as e:
+        print(f"{PROG}: error: {e}", file=sys.stderr)
+        return 2
     if chosen != backend:
         print(f"{PROG}: render back end: {chosen}", file=sys.stderr)
-    app.initialize()
     viewer = ViewerWindow(ViewerOptions(spec=spec, style=args.style, model=model, use_model=not args.no_model,
                                         strength=args.strength, width=width, height=height,
                                         invert_wheel=args.invert_wheel, full_threads=full_threads))

@@ -1,4 +1,4 @@
-"""Which of Filament's graphics back ends draws the viewer window (Open3D's own choice by default; OpenGL on request).
+"""Which of Filament's graphics back ends draws the viewer window (OpenGL by default; Open3D's own choice on request).
 
 Open3D 0.20 draws its GUI with Filament, and where the only Vulkan device is a
 software one (Mesa's llvmpipe: no GPU, Xvfb, a remote desktop) it picks
@@ -8,13 +8,13 @@ slower and far more uneven than through its OpenGL, leaving the render worker
 less of the CPU while dragging (``bench_viewer.py --window`` on a quiet 2-core
 machine, the back ends alternating: 28.3-32.6 frames shown per second while
 dragging through OpenGL, 11.7-15.3 through Vulkan; GUI-loop turns median 13 ms
-against 16-19 ms, p90 18-19 ms against 90-159 ms). ``--render-backend opengl``
-(or ``$STYLIZE3D_RENDER_BACKEND=opengl``) selects it; :data:`DEFAULT_BACKEND` says
-why it is not the default yet.
+against 16-19 ms, p90 18-19 ms against 90-159 ms). So :data:`DEFAULT_BACKEND` is
+OpenGL; ``--render-backend auto`` (or ``$STYLIZE3D_RENDER_BACKEND=auto``) leaves
+Open3D's choice, ``vulkan`` forces Vulkan.
 
 OpenGL on X needs the server's GLX extension; where the display lacks it (some
 VNC or nested X servers) Filament cannot create an OpenGL engine, so
-:func:`select_backend` asks the X server first (``xserver.has_extension``) and keeps
+:func:`select_backend` asks the X server first (``xserver.XDisplay``) and keeps
 Open3D's choice (Vulkan, which needs no GLX) there.
 
 Open3D's Python API does not expose the choice
@@ -31,8 +31,17 @@ back end was selected, so the widget shows it upright. ``open3d-cpu`` is pinned 
 0.20.0 (``pyproject.toml``); ``tests/app/test_viewer_gui.py`` checks the view's
 orientation on screen, so a later Open3D that fixes the widget shows up there.
 
-Headless: nothing here imports Open3D's GUI; :func:`select_backend` and
-:func:`widget_image` import ``open3d`` only for its library and its image type.
+**Start-up.** :func:`start_gui` opens a connection to the X display, selects the back end through it,
+initializes Open3D's GUI and only then closes that connection. An X server whose last client disconnects
+resets itself (Xvfb does unless started with ``-noreset``), and a client connecting during the reset is
+refused; when that client was Open3D's GLFW, Open3D fell back to a windowless mode without a word and the
+viewer ran with no window (on a fresh Xvfb, 2 starts in 12 with the GLX check's own connection opened and
+closed before ``initialize()``; 0 in 12 with it held). A display that does not open at all is an error that
+names it, rather than that windowless run.
+
+Headless: nothing here imports Open3D's GUI at import time; :func:`select_backend` and
+:func:`widget_image` import ``open3d`` only for its library and its image type, :func:`start_gui` the GUI
+when it is called.
 """
 
 from __future__ import annotations
@@ -44,17 +53,15 @@ from typing import Any, Dict, Optional
 
 import numpy as np
 
-from .xserver import has_extension
+from .xserver import XDisplay, has_extension, x11_lib
 
 BACKENDS: Dict[str, int] = {"auto": 0, "opengl": 1, "vulkan": 2}
 """``--render-backend`` choices and their ``EngineInstance::RenderingType`` values (``auto``: Open3D's own
 choice, which is Vulkan on a software Vulkan device)."""
 
-DEFAULT_BACKEND = "auto"
-"""Open3D's own choice. OpenGL drags at twice the frame rate on a software renderer (the module docstring) but
-is not the default yet: in ~1 of 10 window-test runs under it the view was laid out a few pixels wide (a
-32x22 screenshot; a real drag then missed the view), which a relayout on a changed content rect made rarer,
-not gone; under Vulkan none in the same runs."""
+DEFAULT_BACKEND = "opengl"
+"""OpenGL where the X server has GLX (else Open3D's choice): twice the frames shown while dragging on a
+software renderer (the module docstring)."""
 
 ENV_VAR = "STYLIZE3D_RENDER_BACKEND"
 """Environment variable that sets the back end when ``--render-backend`` is not given (benchmarks, tests)."""
@@ -86,18 +93,20 @@ def open3d_library() -> Optional[Path]:
     return found[0] if found else None
 
 
-def select_backend(choice: str) -> str:
+def select_backend(choice: str, display: Optional[XDisplay] = None) -> str:
     """Ask Filament for ``choice`` (a key of :data:`BACKENDS`) before the GUI starts; returns what happened.
 
     Call it before ``gui.Application.instance.initialize()``: the engine is created once, with the back end
-    selected then. ``auto`` leaves Open3D's own choice, and so does ``opengl`` on an X display without GLX.
-    Never raises for a missing library or function (another Open3D build): the returned text says the
-    default is kept.
+    selected then. ``auto`` leaves Open3D's own choice, and so does ``opengl`` on an X display without GLX
+    (asked through ``display``, an open connection, where given; else through a connection to ``$DISPLAY``
+    opened and closed here). Never raises for a missing library or function (another Open3D build): the
+    returned text says the default is kept.
     """
     value = BACKENDS[choice]
     if choice == "auto":
         return choice
-    if choice == "opengl" and has_extension(None, "GLX") is False:
+    glx = display.has_extension("GLX") if display is not None else has_extension(None, "GLX")
+    if choice == "opengl" and glx is False:
         return "opengl not available (the X display has no GLX); Open3D's choice kept"
     lib_path = open3d_library()
     if lib_path is None:
@@ -118,6 +127,35 @@ _flip_rows = False
 """Whether :func:`widget_image` flips rows: set by :func:`select_backend` (the OpenGL back end selected)."""
 
 
+class NoDisplayError(RuntimeError):
+    """The X display does not open (not set, or no X server answers there): the viewer cannot show a window."""
+
+
+def start_gui(choice: str) -> str:
+    """Select ``choice`` (see :func:`select_backend`) and initialize ``gui.Application.instance``, holding a
+    connection to the X display throughout (the module docstring); returns what :func:`select_backend` said.
+
+    Raises:
+        NoDisplayError: ``$DISPLAY`` is not set or does not open (where libX11 can be loaded to ask).
+    """
+    import open3d.visualization.gui as gui
+
+    display = XDisplay.open()
+    if display is None and x11_lib() is not None:
+        name = os.environ.get("DISPLAY")
+        raise NoDisplayError(
+            f"cannot open the X display {name!r}: no X server answers there" if name else
+            "no X display: DISPLAY is not set (the viewer needs a desktop session, or an X server such as "
+            "Xvfb on a machine without one)")
+    try:
+        chosen = select_backend(choice, display)  # before the engine exists: initialize() creates it
+        gui.Application.instance.initialize()
+    finally:
+        if display is not None:
+            display.close()
+    return chosen
+
+
 def widget_image(rgb: np.ndarray) -> Any:
     """The ``open3d.geometry.Image`` to give a ``gui.ImageWidget`` so that it shows ``rgb`` (H, W, 3) uint8
     upright: a copy with its rows reversed under the OpenGL back end, else ``rgb`` as it is (contiguous)."""
@@ -126,5 +164,5 @@ def widget_image(rgb: np.ndarray) -> Any:
     return o3d.geometry.Image(np.ascontiguousarray(rgb[::-1] if _flip_rows else rgb))
 
 
-__all__ = ["BACKENDS", "DEFAULT_BACKEND", "ENV_VAR", "backend_choice", "open3d_library", "select_backend",
-           "widget_image"]
+__all__ = ["BACKENDS", "DEFAULT_BACKEND", "ENV_VAR", "NoDisplayError", "backend_choice", "open3d_library",
+           "select_backend", "start_gui", "widget_image"]

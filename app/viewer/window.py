@@ -138,7 +138,6 @@ class ViewerWindow:
         self._shown_generation = 0
         self._shown: Optional[ViewFrame] = None
         self._requested_at: Dict[int, float] = {}
-        self._laid_out: Tuple[int, int, int, int] = (0, 0, 0, 0)  # the content rect of the last layout
         self._frame_lock = threading.Lock()
         self._pending_frame: Optional[Tuple[RenderResult, int, float]] = None  # the newest frame not yet shown
         self._coalesced = 0  # frames replaced in that slot before the GUI thread took them
@@ -247,7 +246,6 @@ class ViewerWindow:
         if size.width < MIN_WINDOW[0] or size.height < MIN_WINDOW[1]:  # Open3D has no minimum size: grow back
             self.window.size = gui.Size(max(size.width, MIN_WINDOW[0]), max(size.height, MIN_WINDOW[1]))
         r = self.window.content_rect
-        self._laid_out = (r.x, r.y, r.width, r.height)
         em, p = self.em, self.panel
         pw = int(P.Panel.WIDTH_EM * em)
         sh = int(P.Panel.STATUS_EM * em)
@@ -659,11 +657,6 @@ class ViewerWindow:
     def _on_tick(self) -> bool:
         if self._closing:
             return False
-        r = self.window.content_rect
-        if (r.x, r.y, r.width, r.height) != self._laid_out:
-            # Under the OpenGL back end the window's first layout can come before it has its real size (the
-            # view then stayed a few pixels wide); lay it out again whenever its content rect changed
-            self.window.set_needs_layout()
         now = time.monotonic()
         if self._drag is not None:  # the GUI loop's rate while dragging (the bench reports it)
             self.stats["drag_ticks"].append(now)

@@ -81,18 +81,51 @@ def xtest_libs() -> Optional[Tuple[ctypes.CDLL, ctypes.CDLL]]:
     return lx, lt
 
 
+class XDisplay:
+    """An open connection to an X display (``XDisplay.open``); a context manager that closes it.
+
+    The viewer holds one from before Open3D starts until Open3D has its own connection: an X server whose
+    last client disconnects resets itself (Xvfb does, unless started with ``-noreset``), and a connection
+    opened during that reset fails; Open3D's GLFW then fell back to a windowless mode, silently."""
+
+    def __init__(self, lx: ctypes.CDLL, handle: int, name: str) -> None:
+        self._lx, self._handle, self.name = lx, handle, name
+
+    @classmethod
+    def open(cls, display: Optional[str] = None) -> Optional["XDisplay"]:
+        """A connection to ``display`` (default ``$DISPLAY``), or None where none is named, libX11 is missing
+        or the display does not open."""
+        display = display if display is not None else os.environ.get("DISPLAY")
+        lx = x11_lib()
+        if not display or lx is None:
+            return None
+        handle = lx.XOpenDisplay(display.encode())
+        return cls(lx, handle, display) if handle else None
+
+    def has_extension(self, name: str) -> bool:
+        """Whether the server has the extension ``name`` (e.g. "GLX": OpenGL on X)."""
+        if not self._handle:
+            raise ValueError(f"the connection to {self.name} is closed")
+        codes = [ctypes.c_int() for _ in range(3)]
+        return bool(self._lx.XQueryExtension(self._handle, name.encode(), *(ctypes.byref(c) for c in codes)))
+
+    def close(self) -> None:
+        if self._handle:
+            self._lx.XCloseDisplay(self._handle)
+            self._handle = 0
+
+    def __enter__(self) -> "XDisplay":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
 def has_extension(display: Optional[str], name: str) -> Optional[bool]:
     """Whether the X display ``display`` (default ``$DISPLAY``) has the extension ``name`` (e.g. "GLX": OpenGL
     on X); None where that cannot be asked (no display named, libX11 missing, the display does not open)."""
-    display = display if display is not None else os.environ.get("DISPLAY")
-    lx = x11_lib()
-    if not display or lx is None:
+    conn = XDisplay.open(display)
+    if conn is None:
         return None
-    dpy = lx.XOpenDisplay(display.encode())
-    if not dpy:
-        return None
-    try:
-        codes = [ctypes.c_int() for _ in range(3)]
-        return bool(lx.XQueryExtension(dpy, name.encode(), *(ctypes.byref(c) for c in codes)))
-    finally:
-        lx.XCloseDisplay(dpy)
+    with conn:
+        return conn.has_extension(name)
