@@ -199,28 +199,31 @@ class StyleBank(Dataset):
         return torch.from_numpy(self._images[index]).permute(2, 0, 1).to(torch.float32) / 255.0
 
     def crop(
-        self, index: int, rng: np.random.Generator, size: int, min_scale: float = 0.5, flip: float = 0.5
+        self, index: int, rng: np.random.Generator, size: int, min_scale: float = 0.5, flip: float = 0.5,
+        max_scale: float = 1.0,
     ) -> torch.Tensor:
         """A random square crop of style ``index`` resized to (3, size, size), in [0, 1].
 
-        The crop's side is a fraction in [min_scale, 1] of the image's short side
+        The crop's side is a fraction in [min_scale, max_scale] of the image's short side
         (so strokes appear at different scales); flipped horizontally with probability ``flip``.
         """
         check_range(size, "size", 8, 4096)
         check_range(min_scale, "min_scale", 0.01, 1.0)
+        check_range(max_scale, "max_scale", min_scale, 1.0)
         img = self[index].permute(1, 2, 0).numpy()  # (h, w, 3)
         h, w = img.shape[:2]
-        side = max(1, int(round(min(h, w) * rng.uniform(min_scale, 1.0))))
+        side = max(1, int(round(min(h, w) * rng.uniform(min_scale, max_scale))))
         y0, x0 = int(rng.integers(0, h - side + 1)), int(rng.integers(0, w - side + 1))
         out = resize_image(np.ascontiguousarray(img[y0 : y0 + side, x0 : x0 + side]), (int(size), int(size)))
         if rng.random() < flip:
             out = out[:, ::-1]
         return torch.from_numpy(np.ascontiguousarray(out)).permute(2, 0, 1).contiguous()
 
-    def sample(self, rng: np.random.Generator, size: int, min_scale: float = 0.5) -> Tuple[torch.Tensor, int]:
+    def sample(self, rng: np.random.Generator, size: int, min_scale: float = 0.5,
+               max_scale: float = 1.0) -> Tuple[torch.Tensor, int]:
         """A random crop (see :meth:`crop`) of a random style: ((3, size, size), style index)."""
         index = int(rng.integers(0, len(self.files)))
-        return self.crop(index, rng, size, min_scale), index
+        return self.crop(index, rng, size, min_scale, max_scale=max_scale), index
 
     def name(self, index: int) -> str:
         """File name of style ``index``."""

@@ -236,3 +236,5 @@ def test_train_style_stages_are_checked(capsys):
     for bad, words in (("1,x", "comma-separated integers"), ("1,9", "style_stages"), ("2,2", "style_stages")):
         assert main(["train", "--stage", "2", "--style-stages", bad]) == 2
         assert words in capsys.readouterr().err
+    assert main(["train", "--stage", "2", "--style-crop", "0.6", "0.5"]) == 2
+    assert "style_crop" in capsys.readouterr().err

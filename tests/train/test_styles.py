@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from stylize3d_core.errors import InputError
-from stylize3d_core.io.images import load_image
+from stylize3d_core.io.images import load_image, save_image
 from stylize3d_core.train.styles import (
     HELD_OUT_PAINTING_STYLES, NUM_PAINTING_STYLES, StyleBank, StyleBankConfig, build_style_bank, make_painting,
 )
@@ -120,6 +120,23 @@ def test_style_bank_loads_and_crops(bank_dir):
         assert float((img.amax(dim=(1, 2)) - img.amin(dim=(1, 2))).max()) <= tol
     with pytest.raises(IndexError):
         bank[6]
+
+
+def test_style_crops_cover_the_asked_share_of_the_style(tmp_path):
+    """A horizontal ramp 0..255 over 200 pixels: a crop whose side is a quarter of the short side spans a
+    quarter of the ramp (the strokes magnified 4x once resized), the whole-image crop all of it."""
+    ramp = np.repeat(np.linspace(0, 255, 200)[None, :, None], 200, axis=0).repeat(3, axis=2).astype(np.uint8)
+    save_image(tmp_path / "ramp.png", ramp)
+    bank = StyleBank(tmp_path)
+    rng = np.random.default_rng(0)
+    for lo, hi in ((0.25, 0.25), (1.0, 1.0), (0.3, 0.6)):
+        for _ in range(4):
+            crop = bank.crop(0, rng, 40, min_scale=lo, max_scale=hi, flip=0.0)[0]
+            span = float(crop[0, -1] - crop[0, 0])  # the ramp's share the crop covers (its ends resampled)
+            assert lo - 0.03 <= span <= hi + 0.01, (lo, hi, span)
+    assert bank.sample(rng, 16, 0.25, 0.25)[0].shape == (3, 16, 16)
+    with pytest.raises(InputError, match="max_scale"):
+        bank.crop(0, rng, 16, min_scale=0.5, max_scale=0.4)
 
 
 def test_style_bank_errors(tmp_path):

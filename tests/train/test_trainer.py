@@ -173,6 +173,10 @@ def test_bad_settings(data, tmp_path):
     for stages in ((), (1, 1), (5,), (-1,), (1.0,)):
         with pytest.raises(InputError, match="style_stages"):
             TrainConfig(style_stages=stages)
+    for crop in ((0.5,), (0.6, 0.5), (0.0, 1.0), (0.5, 1.5), ("a", 1.0)):
+        with pytest.raises(InputError, match="style_crop"):
+            TrainConfig(style_crop=crop)
+    assert TrainConfig(style_crop=(0.25, 0.5)).style_crop == (0.25, 0.5)
     with pytest.raises(InputError, match="stage-1"):
         train(TrainConfig(stage=2, data_dir=str(data / "train"), out_dir=str(tmp_path / "x")), log=lambda _: None)
     with pytest.raises(InputError):
