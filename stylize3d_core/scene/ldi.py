@@ -51,10 +51,18 @@ Stage 3 of the pipeline (docs/architecture.md, "Pipeline stages"), after 3DPhoto
    is then smoothed by a small normalised convolution and
    clamped to lie behind the foreground by at least ``disparity_jump``; the
    colour, background-only, never takes a foreground pixel's, so no foreground
-   colour can bleed in. **Layer 0
-   is never changed**: the photo's pixels keep their colour and depth (the
-   mixed pixels on the background side of a tear included), so the photo seen
-   from its own camera stays the photo. Only padded boxes around clusters of
+   colour can bleed in. **Layer 0 keeps the photo's colour and depth** (the photo
+   seen from its own camera stays the photo) **but on the silhouettes' background
+   side** (``unmix_silhouettes``): a pixel just outside a foreground edge the
+   hidden layer covers holds the anti-aliased mix of the foreground's colour and
+   the background's, which, left at the background's depth, stays behind as a
+   ghost outline when the foreground moves. It loses the foreground's share (its
+   colour's projection on foreground minus background, the background continued
+   from the sources like the hidden layer's, the foreground the pixel two steps
+   across the tear), where it is such a mix; a pixel that is mostly foreground
+   across a colour edge (the depth's edge inside the colour's) joins the
+   foreground instead, with its colour, and the hidden layer gets the background
+   behind it. Only padded boxes around clusters of
    edges are processed, and the fits are solved only at the sources some band
    pixel continues (its nearest, and its nearest along its row and column: a
    thin rim of the sources), where few, by summing their Gaussian windows
@@ -196,6 +204,12 @@ class LDISettings:
     hidden layer there."""
     max_colour_step: float = 0.05
     """Largest change the colour's gradient may bring, per channel (in [0, 1] colour units)."""
+    unmix_silhouettes: bool = True
+    """Take the foreground's share out of layer 0's background-side pixels at the tears the hidden
+    layer covers (:func:`unmix_silhouette`): an anti-aliased silhouette's pixel just outside the
+    foreground mixes its colour with the background's, and, left at the background's depth, that
+    mix stays behind as a ghost outline when the foreground moves. False: layer 0 keeps the
+    photo's colours everywhere."""
 
     def __post_init__(self) -> None:
         check_range(self.disparity_jump, "disparity_jump", 0.0, 1.0, inclusive=False)
@@ -219,6 +233,8 @@ class LDISettings:
         check_choice(self.hidden_depth, "hidden_depth", ("surface", "plane", "nearest"))
         check_range(self.fit_sigma, "fit_sigma", 0.5, 50.0)
         check_range(self.max_colour_step, "max_colour_step", 0.0, 1.0)
+        if not isinstance(self.unmix_silhouettes, bool):
+            raise InputError("unmix_silhouettes", f"expected a bool, got {self.unmix_silhouettes!r}")
         for name in ("edge_min_px", "island_min_px", "inpaint_radius", "edge_exclusion_px"):
             if int(getattr(self, name)) != getattr(self, name):
                 raise InputError(name, f"must be an integer, got {getattr(self, name)!r}")
@@ -240,7 +256,8 @@ class LDI:
         hidden_depth: (Hc, Wc) float32, layer 1 depth, > the layer-0 depth where
             ``hidden_mask`` (0 elsewhere).
         fg_edge: (Hc, Wc) bool, near side of a tear.
-        bg_edge: (Hc, Wc) bool, far side of a tear.
+        bg_edge: (Hc, Wc) bool, far side of a tear (as torn: a pixel there that joined the
+            foreground, ``unmix_silhouettes``, stays marked).
         depth_scale: the factor that took the input depth to scene units.
         inpainted: False when the hidden-layer step was skipped (no depth edge).
         settings: the settings used.
@@ -344,7 +361,10 @@ def build_ldi(
     hidden_rgb = np.zeros((hc, wc, 3), np.float32)
     hidden_depth = np.zeros((hc, wc), np.float32)
     if hidden is not None:
-        mask1, rgb1, nd1 = hidden[:3]
+        mask1, rgb1, nd1, mask0, unmixed, fore = hidden
+        rgb0[inner][mask0] = unmixed[mask0]  # the background-side silhouette pixels, foreground share out
+        joins = fore > 0
+        nd0[inner][joins] = fore[joins]  # ... or joined to the foreground
         hidden_mask[inner] = mask1
         hidden_rgb[inner][mask1] = rgb1[mask1]
         hidden_depth[inner][mask1] = NEAR_DEPTH / nd1[mask1]
@@ -568,12 +588,16 @@ def _tear(nd: np.ndarray, s: LDISettings) -> Tuple[np.ndarray, np.ndarray, np.nd
 
 def _hidden_layer(
     rgb: np.ndarray, nd: np.ndarray, fg: np.ndarray, bg: np.ndarray, widths: np.ndarray, s: LDISettings
-) -> Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
+) -> Optional[Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
     """Hidden background behind the foreground edges, ``widths`` (H, W) pixels wide behind each.
 
     Returns:
         mask (H, W) bool, rgb (H, W, 3) float32 and nd (H, W) float32 of layer 1
-        (valid where mask); None when no band pixel was found. Layer 0 is left as it is.
+        (valid where mask), and, with ``unmix_silhouettes``, the layer-0 pixels beside those
+        edges on their background side that keep the background's depth (H, W) bool, their
+        colours without the foreground's share (H, W, 3) float32 (see :func:`unmix_silhouette`),
+        and the layer-0 nd (H, W) float32 of those that join the foreground instead (0
+        elsewhere; layer 1 holds the background behind them); None when no band pixel was found.
     """
     h, w = nd.shape
     t = s.disparity_jump
@@ -586,6 +610,9 @@ def _hidden_layer(
     mask = np.zeros((h, w), bool)
     out_rgb = np.zeros((h, w, 3), np.float32)
     out_nd = np.zeros((h, w), np.float32)
+    mask0 = np.zeros((h, w), bool)
+    out_rgb0 = np.zeros((h, w, 3), np.float32)
+    fore = np.zeros((h, w), np.float32)  # layer 0's new nd where a pixel joins the foreground (0 elsewhere)
     for rows, cols, members in box_clusters(edges, max_width + 2 * s.inpaint_radius + ex + 4):
         ndc = nd[rows, cols]  # (h, w)
         rgbc = rgb[rows, cols]  # (h, w, 3)
@@ -618,9 +645,12 @@ def _hidden_layer(
         # every pixel takes the values of its nearest background source (no foreground can leak)
         nearest = nearest_index(source)  # (h, w)
         scan = scan_nearest(source, where=band) if s.hidden_depth == "surface" else None  # (4, N, 2)
+        # layer 0's pixels just outside these edges (a 4-neighbour of one of them), on the background
+        # side: their background colour is continued the same way, from the sources
+        outside = (bg[rows, cols] & (dist < 1.5) & ~band) if s.unmix_silhouettes else np.zeros_like(band)
         # the fits are continued only from the sources some band pixel takes: its nearest, and in
         # "surface" mode the nearest along its row and column (a thin rim of the sources)
-        used = _used_sources(nearest, source, band, scan)
+        used = _used_sources(nearest, source, band | outside, scan)
         srcw = source.astype(np.float32)
         lo = 0.5 * float(ndc[source].min())  # never much farther than anything seen
         want_nd, want_rgb = s.hidden_depth != "nearest", s.inpaint_method == "linear"
@@ -650,8 +680,7 @@ def _hidden_layer(
             cv2.GaussianBlur(weight, (0, 0), sigma), 1e-6
         )
         behind = np.minimum(blur_nd, ndc - t)  # (h, w) strictly behind the foreground
-        # Layer 0 is never recoloured (the photo seen from its own camera stays the photo): the
-        # background side's mixed pixels keep their colour there; the hidden layer is background-only.
+        # The hidden layer is background-only (layer 0's pixels beside the edges: below).
         todo = band
         if chosen_rgb is not None:  # chosen with the surface
             colour = np.zeros(rgbc.shape, np.float32)
@@ -668,9 +697,108 @@ def _hidden_layer(
         sub_mask |= band
         out_rgb[rows, cols][band] = colour[band]
         out_nd[rows, cols][band] = behind[band]
+        if outside.any():
+            pr, pc = np.nonzero(outside)
+            if col_fit is not None:
+                background = np.clip(extrapolate(col_fit, nearest, source, s.max_colour_step, outside)[pr, pc], 0.0, 1.0)
+            else:
+                background = rgbc[source][nearest[pr, pc]]  # the nearest source's colour
+            unmixed, share, fore_rgb, fore_nd = unmix_silhouette(rgbc, ndc, (pr, pc), background, t)
+            # mostly foreground (the depth's edge lies inside the colour's) across a colour edge: the
+            # pixel joins the foreground with its colour, and the hidden layer gets the background
+            # behind it
+            edge = ((fore_rgb - background) ** 2).mean(axis=1) >= _JOIN_CONTRAST ** 2
+            joins = (share > _JOIN_FOREGROUND) & edge  # (N,)
+            gr, gc = pr + rows.start, pc + cols.start  # in the photo
+            mask0[gr[~joins], gc[~joins]] = True
+            out_rgb0[gr[~joins], gc[~joins]] = unmixed[~joins]
+            j = gr[joins], gc[joins]
+            fore[j] = fore_nd[joins]
+            mask[j] = True
+            out_rgb[j] = background[joins]
+            out_nd[j] = ndc[pr[joins], pc[joins]]
     if not mask.any():
         return None
-    return mask, out_rgb, out_nd
+    return mask, out_rgb, out_nd, mask0, out_rgb0, fore
+
+
+_JOIN_FOREGROUND = 0.5
+"""A background-side silhouette pixel whose foreground share (:func:`unmix_silhouette`) exceeds this
+is mostly foreground (the depth's edge lies inside the colour's): it joins the foreground."""
+
+_JOIN_CONTRAST = 0.1
+"""... and only where the foreground's and the background's colours differ by at least this (RMS over
+the channels): a colour edge, not texture that happens to resemble the foreground."""
+
+_MIX_RESIDUAL = 0.25
+"""A background-side silhouette pixel is taken for a mix of ``F`` and ``B`` (:func:`unmix_silhouette`)
+where its colour lies within this fraction of ``|F - B|`` of the segment between them."""
+
+_UNMIX_CONTRAST = 0.03
+"""Colour contrast (per channel, RMS) below which :func:`unmix_silhouette`'s foreground share fades
+out: its regulariser, so a low-contrast edge's texture is not taken for a mix."""
+
+
+def unmix_silhouette(
+    rgb: np.ndarray, nd: np.ndarray, pixels: Tuple[np.ndarray, np.ndarray], background: np.ndarray, jump: float
+) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Take the foreground's share out of background-side silhouette pixels.
+
+    At an anti-aliased silhouette the pixel just outside the foreground holds
+    ``c = a F + (1 - a) B``: a share ``a`` of the foreground's colour ``F`` (it covers that
+    much of the pixel) over the background's ``B``. Each of ``pixels`` (a background pixel
+    with a nearer 4-neighbour across a tear) takes ``F`` from the foreground across the
+    tear (the pixel two steps in where it is on the same surface as the one beside the
+    tear, which may itself be mixed; else that one; averaged over the tears' directions)
+    and ``B`` from ``background`` (estimated from background-only sources), and loses
+    ``a (F - B)``, where ``a`` is its colour's projection on ``F - B``
+    (``<c - B, F - B> / (|F - B|^2 + 3 * _UNMIX_CONTRAST^2)``, in [0, 1]), where it is such
+    a mix (within ``_MIX_RESIDUAL |F - B|`` of the segment from ``B`` to ``F``; texture
+    elsewhere). Only the part of its colour along ``F - B`` changes: what remains is the
+    background's own texture.
+
+    Args:
+        rgb: (h, w, 3) float32 colours.
+        nd: (h, w) float32 normalised disparity (larger is nearer).
+        pixels: (rows, cols), N pixels to unmix.
+        background: (N, 3) float32, their estimated background colour.
+        jump: the tear threshold on ``nd``.
+    Returns:
+        ``(colours, share, fore, fore_nd)`` of the N pixels: (N, 3) float32 in [0, 1], their
+        colours with the foreground's share taken out; (N,) float32, that share ``a`` (0 where
+        the colour is no mix or no tear is found); (N, 3) float32 ``F``; (N,) float32, the ``nd``
+        of the nearest neighbour across a tear (0 where none).
+    """
+    h, w = nd.shape
+    rows, cols = (np.asarray(x, np.int64) for x in pixels)
+    c = rgb[rows, cols]  # (N, 3)
+    own = nd[rows, cols]  # (N,)
+    fore = np.zeros(c.shape, np.float32)
+    fore_nd = np.zeros(own.shape, np.float32)
+    count = np.zeros(own.shape, np.float32)
+    for di, dj in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        r1, c1 = rows + di, cols + dj  # the neighbour across
+        inside = (r1 >= 0) & (r1 < h) & (c1 >= 0) & (c1 < w)
+        r1, c1 = np.clip(r1, 0, h - 1), np.clip(c1, 0, w - 1)
+        across = inside & (nd[r1, c1] - own > jump)  # (N,) a tear with a nearer pixel that way
+        if not across.any():
+            continue
+        r2, c2 = np.clip(r1 + di, 0, h - 1), np.clip(c1 + dj, 0, w - 1)  # two steps in (the edge's, at the box's side)
+        inner = np.abs(nd[r2, c2] - nd[r1, c1]) <= jump
+        f = np.where(inner[:, None], rgb[r2, c2], rgb[r1, c1])  # (N, 3)
+        fore[across] += f[across]
+        fore_nd[across] = np.maximum(fore_nd[across], nd[r1, c1][across])
+        count[across] += 1.0
+    ok = count > 0  # (N,)
+    fore[ok] /= count[ok, None]
+    diff = fore - background  # (N, 3) F - B
+    share = np.clip(((c - background) * diff).sum(-1) / ((diff * diff).sum(-1) + 3 * _UNMIX_CONTRAST ** 2), 0.0, 1.0)
+    # a mix lies on the segment from B to F: far from it, the pixel is texture, not a mix
+    residual = c - background - share[:, None] * diff
+    mixes = (residual * residual).sum(-1) <= _MIX_RESIDUAL ** 2 * (diff * diff).sum(-1)
+    share = np.where(ok & mixes, share, 0.0).astype(np.float32)  # (N,)
+    out = np.clip(c - share[:, None] * diff, 0.0, 1.0).astype(np.float32)
+    return out, share, fore, fore_nd
 
 
 def _used_sources(
