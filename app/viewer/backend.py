@@ -105,8 +105,8 @@ def select_backend(choice: str, display: Optional[XDisplay] = None) -> str:
     value = BACKENDS[choice]
     if choice == "auto":
         return choice
-    glx = display.has_extension("GLX") if display is not None else has_extension(None, "GLX")
-    if choice == "opengl" and glx is False:
+    if choice == "opengl" and (display.has_extension("GLX") if display is not None
+                               else has_extension(None, "GLX")) is False:
         return "opengl not available (the X display has no GLX); Open3D's choice kept"
     lib_path = open3d_library()
     if lib_path is None:
