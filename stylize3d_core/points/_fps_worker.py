@@ -10,10 +10,15 @@ fraction of a second. It reads requests from stdin and answers on its stdout:
   ``n_samples`` int64 indices (status 0), or an error message (status 1).
 
 It sends one byte ``R`` once its imports are done and exits at the end of stdin
-(when its parent closes the pipe or dies).
+(when its parent closes the pipe or dies), quietly also when its answer meets a
+closed pipe (the parent died first). It ignores SIGINT: Ctrl+C in a terminal
+reaches the whole process group, and the parent is the one that handles it (a
+traceback from this process after the parent's one-line message was seen when
+an export was interrupted).
 """
 
 import os
+import signal
 import struct
 import sys
 
@@ -56,4 +61,8 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        main()
+    except BrokenPipeError:  # the parent is gone: nobody to answer
+        os._exit(0)

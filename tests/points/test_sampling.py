@@ -183,3 +183,29 @@ def test_stop_while_a_sampling_holds_the_worker_kills_it(fps_worker, surface_clo
     a = farthest_point_sample(xyz, 300)  # a new worker
     assert fps_worker.enabled and fps_worker._proc is not proc
     assert torch.equal(a, farthest_point_sample_reference(xyz, 300, first=int(a[0])))
+
+
+def test_worker_is_quiet_when_its_parent_is_gone_or_ctrl_c_reaches_it():
+    """Ctrl+C in a terminal reaches the whole process group and the parent handles it; a worker whose answer
+    meets a closed pipe (the parent died first) exits without a traceback on the shared stderr."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    source = _sampling._WORKER_SOURCE.read_text(encoding="utf-8")
+    for stop in ("closed stdout", "SIGINT"):
+        proc = subprocess.Popen([sys.executable, "-c", source], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE)
+        if stop == "closed stdout":
+            proc.stdout.close()  # its ready byte meets a broken pipe
+        else:
+            assert proc.stdout.read(1) == b"R"
+            proc.send_signal(signal.SIGINT)
+            time.sleep(0.3)
+            assert proc.poll() is None  # ignored: it still waits for requests
+            proc.stdout.close()
+        proc.stdin.close()  # the end of its input ends it
+        err = proc.stderr.read()
+        proc.stderr.close()
+        assert proc.wait(timeout=60) == 0 and b"Traceback" not in err, (stop, err)
