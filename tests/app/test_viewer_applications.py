@@ -196,7 +196,8 @@ def test_layered_view_keeps_the_foreground_in_every_view(session):
         cov = session.layers.renderer(session._stylized, session.strength).coverage(cam, h, w)
         fg, bg = cov > 0.999, cov <= 0.0
         assert fg.sum() > 0.1 * h * w and bg.sum() > 0.3 * h * w
-        assert np.abs(layered[fg] - plain[fg]).max() < 1e-5  # the foreground: the photo's own colours
+        # the foreground: the photo's own colours, less what a coverage just under 1 lets through from behind
+        assert (np.abs(layered[fg] - plain[fg]) <= (1.0 - cov[fg])[:, None] + 1e-5).all()
         assert np.abs(layered[bg] - full[bg]).max() < 1e-5  # the background: stylized
         assert np.abs(full[fg] - plain[fg]).mean() > 0.02  # (stylizing does change the foreground)
     session.layers = None
