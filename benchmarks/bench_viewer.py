@@ -72,7 +72,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's app and library
 
-from app.viewer.backend import BACKENDS, backend_choice
+from app.viewer.backend import BACKENDS, DEFAULT_BACKEND, backend_choice
 from app.viewer.orbit import OrbitPose, pose_camera
 from app.viewer.session import DEFAULT_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE, ViewerSession
 from app.viewer.state import PreviewSettings, choose_preview_long_side
@@ -551,7 +551,7 @@ def main() -> None:
     parser.add_argument("--save-report", default=None, metavar="JSON",
                         help="--window: write the window's report (its frame log, GUI-loop turns) and the drags here")
     parser.add_argument("--render-backend", default=None, choices=sorted(BACKENDS),
-                        help="--window: the viewer's graphics back end (default: the viewer's, auto)")
+                        help=f"--window: the viewer's graphics back end (default: the viewer's, {DEFAULT_BACKEND})")
     parser.add_argument("--megapixels", type=float, default=1.0, help="photo size of --interactive and --window "
                         "(default 1 MP)")
     parser.add_argument("--repeats", type=int, default=2, help="drag pairs per settings in --interactive (default 2)")

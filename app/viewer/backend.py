@@ -53,7 +53,7 @@ from typing import Any, Dict, Optional
 
 import numpy as np
 
-from .xserver import XDisplay, has_extension, x11_lib
+from .xserver import XDisplay, x11_lib
 
 BACKENDS: Dict[str, int] = {"auto": 0, "opengl": 1, "vulkan": 2}
 """``--render-backend`` choices and their ``EngineInstance::RenderingType`` values (``auto``: Open3D's own
@@ -98,15 +98,14 @@ def select_backend(choice: str, display: Optional[XDisplay] = None) -> str:
 
     Call it before ``gui.Application.instance.initialize()``: the engine is created once, with the back end
     selected then. ``auto`` leaves Open3D's own choice, and so does ``opengl`` on an X display without GLX
-    (asked through ``display``, an open connection, where given; else through a connection to ``$DISPLAY``
-    opened and closed here). Never raises for a missing library or function (another Open3D build): the
-    returned text says the default is kept.
+    (asked through ``display``, an open connection; None: not asked). Never raises for a missing library
+    or function (another Open3D build): the returned text says the default is kept. :func:`start_gui`
+    calls it with the connection it holds.
     """
     value = BACKENDS[choice]
     if choice == "auto":
         return choice
-    if choice == "opengl" and (display.has_extension("GLX") if display is not None
-                               else has_extension(None, "GLX")) is False:
+    if choice == "opengl" and display is not None and not display.has_extension("GLX"):
         return "opengl not available (the X display has no GLX); Open3D's choice kept"
     lib_path = open3d_library()
     if lib_path is None:

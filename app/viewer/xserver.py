@@ -4,7 +4,8 @@ Headless like the test hooks (:mod:`app.viewer.script`): nothing here imports
 Open3D. :func:`start_xvfb` starts an Xvfb that picks a free display number
 itself (``-displayfd``); :func:`xtest_libs` loads libX11 and libXtst through
 ctypes, whose ``XTestFake*Event`` calls send real mouse and key events;
-:func:`has_extension` asks a display for an extension (GLX: can it run OpenGL).
+:class:`XDisplay` holds a connection to a display and asks it for an extension
+(GLX: can it run OpenGL).
 """
 
 from __future__ import annotations
@@ -119,13 +120,3 @@ class XDisplay:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-def has_extension(display: Optional[str], name: str) -> Optional[bool]:
-    """Whether the X display ``display`` (default ``$DISPLAY``) has the extension ``name`` (e.g. "GLX": OpenGL
-    on X); None where that cannot be asked (no display named, libX11 missing, the display does not open)."""
-    conn = XDisplay.open(display)
-    if conn is None:
-        return None
-    with conn:
-        return conn.has_extension(name)

@@ -82,23 +82,25 @@ def test_the_choice_reaches_filament_and_opengl_falls_back_without_glx(monkeypat
     """Each choice resolves to its Filament back end (its own log line: the RenderingType values are right).
     An X server without GLX (Xvfb -extension GLX) cannot run an OpenGL engine: the choice falls back to
     Open3D's own (Vulkan), and the window still opens there."""
-    from app.viewer.xserver import has_extension, start_xvfb
+    from app.viewer.xserver import XDisplay, start_xvfb
 
-    assert has_extension("", "GLX") is None  # no display named: unknown
+    assert XDisplay.open("") is None  # no display named
     servers = [start_xvfb((640, 480)), start_xvfb((640, 480), extra_args=("-extension", "GLX"))]
     try:
         if any(s is None for s in servers):
             pytest.skip("Xvfb is not installed or did not start")
         (_, with_glx), (_, without) = servers
-        assert has_extension(with_glx, "GLX") is True
-        assert has_extension(without, "GLX") is False
+        with XDisplay.open(with_glx) as conn:
+            assert conn.has_extension("GLX") is True
+        with XDisplay.open(without) as conn:
+            assert conn.has_extension("GLX") is False
         for choice, resolved in (("opengl", "OpenGL"), ("vulkan", "Vulkan")):
             log = _open_window(with_glx, choice)
             assert f"resolved backend: {resolved}" in log and "opened" in log, log
             assert "headless" not in log, log  # a real window, not Open3D's windowless fallback
-        monkeypatch.setenv("DISPLAY", without)
         monkeypatch.setattr(backend, "_flip_rows", False)
-        assert "no GLX" in backend.select_backend("opengl") and not backend._flip_rows
+        with XDisplay.open(without) as conn:
+            assert "no GLX" in backend.select_backend("opengl", conn) and not backend._flip_rows
         log = _open_window(without, "opengl")
         assert "no GLX" in log and "resolved backend: Vulkan" in log and "opened" in log, log
     finally:
