@@ -354,7 +354,8 @@ the GUI thread's turn, handing it to the widget; frames replaced in the hand-ove
 
 
 def window(model: str, megapixels: float, tmp: str, max_size: int, repeats: int, threads: int,
-           plain: bool = False, render_backend: Optional[str] = None, save_report: Optional[str] = None) -> None:
+           plain: bool = False, render_backend: Optional[str] = None, save_report: Optional[str] = None,
+           full_threads: Optional[int] = None, decoder_threads: Optional[int] = None) -> None:
     """The viewer in its own process on Xvfb, driven with real XTest drags (see the module docstring)."""
     import json
     import multiprocessing
@@ -387,6 +388,8 @@ def window(model: str, megapixels: float, tmp: str, max_size: int, repeats: int,
             "--max-size", str(max_size or max(big_hw)),
             "--threads", str(threads), "--size", f"{screen[0]}x{screen[1]}",
             *(["--render-backend", render_backend] if render_backend else []),
+            *(["--full-threads", str(full_threads)] if full_threads else []),
+            *(["--decoder-threads", str(decoder_threads)] if decoder_threads else []),
             "--test-script", str(script), "--test-report", str(report)]
     proc = multiprocessing.get_context("spawn").Process(target=run_viewer_process, args=(argv, display))
     proc.start()
@@ -552,6 +555,10 @@ def main() -> None:
                         help="--window: write the window's report (its frame log, GUI-loop turns) and the drags here")
     parser.add_argument("--render-backend", default=None, choices=sorted(BACKENDS),
                         help=f"--window: the viewer's graphics back end (default: the viewer's, {DEFAULT_BACKEND})")
+    parser.add_argument("--full-threads", type=int, default=None,
+                        help="--window: the viewer's --full-threads (default: the viewer's own choice)")
+    parser.add_argument("--decoder-threads", type=int, default=None,
+                        help="--window: the viewer's --decoder-threads (default: the viewer's own choice)")
     parser.add_argument("--megapixels", type=float, default=1.0, help="photo size of --interactive and --window "
                         "(default 1 MP)")
     parser.add_argument("--repeats", type=int, default=2, help="drag pairs per settings in --interactive (default 2)")
@@ -563,7 +570,7 @@ def main() -> None:
     if args.window:
         with tempfile.TemporaryDirectory() as tmp:
             window(args.model or str(DEFAULT_MODEL), args.megapixels, tmp, args.max_size, args.repeats, args.threads,
-                   args.plain, args.render_backend, args.save_report)
+                   args.plain, args.render_backend, args.save_report, args.full_threads, args.decoder_threads)
         return
     if args.interactive:
         model = args.model or str(DEFAULT_MODEL)

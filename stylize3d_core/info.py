@@ -153,6 +153,7 @@ def collect() -> Report:
         "opencv": _guard(_opencv),
         "numpy": _guard(lambda: {"version": __import__("numpy").__version__}),
         "onnxruntime": _guard(lambda: {"version": __import__("onnxruntime").__version__}),
+        "onnx": _guard(lambda: {"version": __import__("onnx").__version__}),
         "ffmpeg": _guard(_ffmpeg),
         "cpus": _guard(_cpus),
         "data": _guard(_data),

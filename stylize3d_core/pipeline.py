@@ -265,7 +265,7 @@ def _load_photo3d(spec: PhotoSpec, log: Log) -> Tuple[Photo3D, Tuple[int, int]]:
 
 def warm_up(wait: bool = False) -> float:
     """Pay the once-per-process costs of the first photo ahead of it: import the depth sources (OpenCV's
-    contrib modules, onnxruntime's loader), start the farthest-point-sampling worker process and load the
+    contrib modules, onnxruntime's loader, onnx for the decoder's graph), start the farthest-point-sampling worker process and load the
     k-NN grid's, the colour transfer's, the encoder's and the rasterizer's compiled kernels (Numba). Each would otherwise run beside, and slow,
     the first photo's depth, LDI and geometry: the viewer calls this at start, while its window opens.
     ``wait``: return when all of it is done (the benchmarks time a photo after it). Returns the seconds
@@ -288,6 +288,7 @@ def warm_up(wait: bool = False) -> float:
 def _import_and_load() -> None:
     try:
         from .depth import sources  # noqa: F401 (imported lazily by load_photo3d)
+        from .models import decoder_onnx
         from .models.colour_transfer import warm_up as load_colour_map
         from .models.encoder import warm_up as load_neighbour_max
         from .points.neighbours import warm_up as load_grid_search
@@ -295,6 +296,7 @@ def _import_and_load() -> None:
         load_grid_search()  # the k-NN grid's Numba kernels
         load_colour_map()  # the colour transfer's
         load_neighbour_max()  # the encoder's
+        decoder_onnx.available()  # imports onnx and onnxruntime (~0.8 s cold): the decoder's first frame
     except Exception:  # noqa: BLE001 (a failed warm-up is only a slower first photo; the photo's own load reports)
         pass
 

@@ -389,6 +389,47 @@ def test_bfloat16_decoding_setting(stylized):
         StylizeSettings(bfloat16="yes")
 
 
+def test_decoder_runtime_setting(stylized):
+    """ONNX Runtime (the default where it imports) and torch give the same frames and previews."""
+    from dataclasses import replace
+
+    cam = Cameras.identity(stylized.photo.fov_y_deg)
+    moved = Cameras.create(np.array([[1, 0, 0, 0.05], [0, 1, 0, 0.02], [0, 0, 1, 0], [0, 0, 0, 1]], np.float32)[None],
+                           stylized.photo.fov_y_deg)
+    before = stylized.settings
+    assert before.decoder_runtime == "auto" and before.decode_onnx
+    out = {}
+    try:
+        for runtime in ("torch", "onnxruntime"):
+            stylized.settings = replace(before, decoder_runtime=runtime)
+            assert stylized.settings.decode_onnx == (runtime == "onnxruntime")
+            out[runtime] = [stylized.render(c, 48, 64, preview=p) for c in (cam, moved) for p in (False, True)]
+        stylized.settings = replace(before, decoder_runtime="onnxruntime", bfloat16=True)
+        assert not stylized.settings.decode_onnx  # bfloat16 decoding is torch's
+    finally:
+        stylized.settings = before
+    for a, b in zip(out["torch"], out["onnxruntime"]):
+        assert np.abs(a - b).max() <= 2e-5
+    with pytest.raises(InputError, match="decoder_runtime"):
+        StylizeSettings(decoder_runtime="tensorrt")
+
+
+def test_onnx_threads_context():
+    from stylize3d_core.models.decoder_onnx import _LOCAL, onnx_threads
+
+    assert getattr(_LOCAL, "threads", None) is None
+    with onnx_threads(2):
+        assert _LOCAL.threads == 2
+        with onnx_threads(None):
+            assert _LOCAL.threads is None
+        assert _LOCAL.threads == 2
+    assert _LOCAL.threads is None
+    for bad in (0, -1, 1.5, True):
+        with pytest.raises(InputError):
+            with onnx_threads(bad):
+                pass
+
+
 def test_border_margin_rounds_to_the_decoder_stride_and_respects_the_fov_limit():
     from stylize3d_core.geometry.camera import MAX_FOV_DEG
     from stylize3d_core.stylize import _with_margin

@@ -3,7 +3,7 @@
     stylize3d-viewer [PHOTO] [--style STYLE] [--depth SPEC] [--refine-depth METHOD]
                      [--model CHECKPOINT | --no-model]
                      [--max-size 640] [--fov DEG] [--strength 1] [--threads 1] [--size 1280x800] [--invert-wheel]
-                     [--full-threads N] [--render-backend opengl|vulkan|auto]
+                     [--full-threads N] [--decoder-threads N] [--render-backend opengl|vulkan|auto]
                      [--test-script steps.json --test-report report.json]
 
 Modules: :mod:`.orbit` (camera math), :mod:`.state` (view state, preview sizes,
@@ -64,6 +64,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="torch threads of the view's full-quality frames, rendered once the camera rests and the "
                         "window no longer redraws (default: one less than the cores where there are 3 or more, "
                         "else 1)")
+    p.add_argument("--decoder-threads", type=int, default=None,
+                   help="ONNX Runtime threads of the decoder in the view's full-quality frames (default: the "
+                        "cores; its threads sleep when idle, unlike torch's)")
     p.add_argument("--invert-wheel", action="store_true",
                    help="wheel up moves backwards (default: wheel up moves forwards, as in common 3D viewers)")
     p.add_argument("--render-backend", default=None, choices=sorted(BACKENDS),
@@ -104,7 +107,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     except InputError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
-    for flag, value in (("--threads", args.threads), ("--full-threads", args.full_threads)):
+    for flag, value in (("--threads", args.threads), ("--full-threads", args.full_threads),
+                        ("--decoder-threads", args.decoder_threads)):
         if value is not None and value < 1:
             print(f"{PROG}: {flag} must be >= 1, got {value}", file=sys.stderr)
             return 2
@@ -123,7 +127,9 @@ def main(argv: Optional[List[str]] = None) -> int:
     import open3d.visualization.gui as gui
     import torch
 
-    full_threads = args.full_threads or default_full_threads(torch.get_num_threads())  # torch's default: the cores
+    cores = torch.get_num_threads()  # torch's default: the cores
+    full_threads = args.full_threads or default_full_threads(cores)
+    decoder_threads = args.decoder_threads or cores
     torch.set_num_threads(args.threads)
     # The compute worker runs Python between its torch calls; with the default 5 ms switch interval every
     # GUI callback (mouse moves, ticks, frames handed over) could wait that long for the GIL, several times per
@@ -148,7 +154,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         print(f"{PROG}: render back end: {chosen}", file=sys.stderr)
     viewer = ViewerWindow(ViewerOptions(spec=spec, style=args.style, model=model, use_model=not args.no_model,
                                         strength=args.strength, width=width, height=height,
-                                        invert_wheel=args.invert_wheel, full_threads=full_threads))
+                                        invert_wheel=args.invert_wheel, full_threads=full_threads,
+                                        decoder_threads=decoder_threads))
     import signal  # SIGINT / SIGTERM close the window like its close button (handled at the next GUI callback)
 
     received: List[int] = []

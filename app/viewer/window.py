@@ -41,6 +41,7 @@ import open3d.visualization.gui as gui
 
 from stylize3d_core.defaults import DEFAULT_STRENGTH
 from stylize3d_core.errors import InputError
+from stylize3d_core.models.decoder_onnx import onnx_threads
 from stylize3d_core.pipeline import PhotoSpec
 from stylize3d_core.render.plain import frame_size
 from stylize3d_core.threads import torch_threads
@@ -83,6 +84,8 @@ class ViewerOptions:
         invert_wheel: wheel up moves backwards (default False: wheel up moves forwards, as in common
             3D viewers).
         full_threads: torch threads of the view's full-quality frames (None: the worker's own count).
+        decoder_threads: ONNX Runtime threads of the decoder in the view's full-quality frames (None: the
+            frame's torch count; :func:`~stylize3d_core.models.decoder_onnx.onnx_threads`).
     """
 
     spec: PhotoSpec = PhotoSpec(max_size=VIEWER_MAX_SIZE)
@@ -94,6 +97,7 @@ class ViewerOptions:
     height: int = 800
     invert_wheel: bool = False
     full_threads: Optional[int] = None
+    decoder_threads: Optional[int] = None
 
 
 class ViewerWindow:
@@ -536,12 +540,13 @@ class ViewerWindow:
         cancel = None if preview or camera is not None else threading.Event()
         stop = None if cancel is None else cancel.is_set
         threads = None if preview else self.options.full_threads
+        decoder_threads = None if preview else self.options.decoder_threads
         requested = time.perf_counter()
 
         def render() -> Tuple[ViewFrame, o3d.geometry.Image, Dict[str, float]]:  # (on the worker)
             started = time.perf_counter()
             times: Dict[str, float] = {"requested": requested, "wait": started - requested}
-            with torch_threads(threads):
+            with torch_threads(threads), onnx_threads(decoder_threads):
                 frame = session.render_view(cam, size, None, preview=preview, stylized=stylized, should_stop=stop,
                                             split=split, calibrate=scale >= 1.0, timings=times)
             t = time.perf_counter()

@@ -88,6 +88,7 @@ class Variant:
     decode_scale: int = 1  # split-resolution decoding: the U-Net at 1/decode_scale per side (final and preview)
     final_points_per_pixel: Optional[float] = None  # StylizeSettings.final_points_per_pixel of full frames
     tensor_rasterizer: bool = False  # the rasterizer's tensor path instead of its compiled one (rasterize_fast)
+    runtime: str = "auto"  # StylizeSettings.decoder_runtime (the reference: ONNX Runtime where it imports)
 
     @property
     def setting(self) -> bool:
@@ -119,7 +120,8 @@ def variants(quick: bool) -> List[Variant]:
     else:
         out += [Variant("bfloat16 decoder", "bfloat16", bf16_decoder=True, slow=not native_bfloat16()),
                 Variant("bfloat16 style CNN", "bfloat16", bf16_style=True)]
-    out += [Variant("channels-first (NCHW) decoder", "channels-last", channels_first=True)]
+    out += [Variant("torch decoder (channels-last), not ONNX Runtime", "decoder runtime", runtime="torch")]
+    out += [Variant("channels-first (NCHW) torch decoder", "channels-last", channels_first=True, runtime="torch")]
     out += [Variant("rasterizer's tensor path (not compiled)", "rasterizer", tensor_rasterizer=True)]
     out += [Variant("1 thread", "threads", threads=1)]
     return out
@@ -177,7 +179,7 @@ class SpeedScene:
 
     @contextlib.contextmanager
     def stylized(self, supersample: int = 1, per_pixel: float = 3.0, decode_scale: int = 1,
-                 final_per_pixel: Optional[float] = None, bfloat16: bool = False):
+                 final_per_pixel: Optional[float] = None, bfloat16: bool = False, runtime: str = "auto"):
         """The one ``Stylized3DPhoto`` of the scene, with these settings while the context lasts (its
         settings are read at render time, so the cached geometry and features are shared by every variant)."""
         from ..stylize import Stylized3DPhoto
@@ -189,7 +191,7 @@ class SpeedScene:
         before = s.settings
         s.settings = replace(before, supersample=supersample, preview_points_per_pixel=per_pixel,
                              decode_scale=decode_scale, preview_decode_scale=decode_scale,
-                             final_points_per_pixel=final_per_pixel, bfloat16=bfloat16)
+                             final_points_per_pixel=final_per_pixel, bfloat16=bfloat16, decoder_runtime=runtime)
         try:
             yield s
         finally:
@@ -240,7 +242,7 @@ class VariantRun:
         self._stack = contextlib.ExitStack()
         self.s = self._stack.enter_context(self.scene.stylized(v.supersample, v.preview_points_per_pixel or 3.0,
                                                                v.decode_scale, v.final_points_per_pixel,
-                                                               v.bf16_decoder))
+                                                               v.bf16_decoder, v.runtime))
         self._stack.enter_context(torch_threads(v.threads))  # restored when the stack closes
         self._config = self.s.model.decoder.config
         if v.channels_first:

@@ -511,16 +511,24 @@ class UNetDecoder(nn.Module):
                 check_finite(t, name)
 
     def forward(self, features: torch.Tensor, mask: torch.Tensor, should_stop: StopCheck = None, *,
-                detail: Optional[Tuple[torch.Tensor, torch.Tensor]] = None, bfloat16: bool = False) -> torch.Tensor:
+                detail: Optional[Tuple[torch.Tensor, torch.Tensor]] = None, bfloat16: bool = False,
+                runtime=None) -> torch.Tensor:
         """``detail``: split-resolution decoding (see the module docstring): the detail colours
         (B, 3, H, W) and their coverage (B, 1, H, W) at the output size, while ``features`` and ``mask``
         come at a smaller size; the U-Net's outputs are upsampled to (H, W) and the colour transform
         recolours these colours. Needs the colour transform (``transform_channels`` 3).
 
         ``bfloat16``: decode under a CPU bfloat16 autocast (inference; see the module docstring);
-        the result is float32 either way."""
+        the result is float32 either way.
+
+        ``runtime``: an :class:`~stylize3d_core.models.decoder_onnx.OnnxUNet` of this decoder (inference, float32):
+        it runs the U-Net (the same outputs up to float rounding, faster on CPUs without native bfloat16);
+        everything around it (padding, crop, heads, colour transform) is this method's."""
         if bfloat16 and torch.is_grad_enabled():
             raise InputError("bfloat16", "bfloat16 decoding is for inference (run under torch.inference_mode())")
+        if runtime is not None and (bfloat16 or torch.is_grad_enabled()):
+            raise InputError("runtime", "the ONNX Runtime U-Net is for float32 inference (under "
+                                        "torch.inference_mode(), without bfloat16)")
         self._check(features, mask)
         if detail is not None:
             detail = self._check_detail(features, detail)
@@ -532,9 +540,40 @@ class UNetDecoder(nn.Module):
         # bfloat16: the U-Net's convolutions under the autocast, from an input assembled in bfloat16;
         # its outputs back in float32 for the heads (sigmoid, tanh, the per-pixel colour matrices)
         amp = torch.autocast("cpu", dtype=torch.bfloat16) if bfloat16 else contextlib.nullcontext()
+        if runtime is not None:
+            x = _assemble(features, mask, 2**self.config.levels, True, should_stop)  # NHWC, as the graph takes it
+            padded = tuple(x.shape[-2:])
+            y, coefficients = runtime.run(x, should_stop)
+            y = y[..., :h, :w]
+            if self.transform is not None and coefficients is None:
+                coefficients = constant_transform(self.transform)
+        else:
+            y, coefficients, padded = self._unet(features, mask, should_stop, bfloat16, amp)
+        rgb = torch.sigmoid(y[:, :3])  # (B, 3, H, W)
+        texture = TEXTURE_SCALE * torch.tanh(y[:, 3:]) if self.config.texture_channels else None
+        if self.transform is not None:
+            _stop(should_stop)
+            if detail is not None:  # the U-Net's outputs at the decoding size, upsampled to the detail's
+                colours, mask = detail
+                out_size = tuple(colours.shape[-2:])
+                rgb = upsample_to(rgb, out_size)
+                if texture is not None:
+                    texture = upsample_to(texture, out_size)
+                if coefficients.shape[-2:] != (1, 1):
+                    coefficients = upsample_to(coefficients, padded)[..., :h, :w]
+                padded = out_size
+            rgb = apply_colour_transform(rgb, colours, mask, coefficients, padded, texture)
+        return rgb.contiguous()
+
+    def _unet(self, features: torch.Tensor, mask: torch.Tensor, should_stop: StopCheck, bfloat16: bool,
+              amp) -> Tuple[torch.Tensor, Optional[torch.Tensor], Tuple[int, int]]:
+        """The U-Net in torch: its last convolution's output cropped to (H, W) (B, 3 + texture, H, W), the
+        transform head's coefficients (None without the head) and the padded size (Hp, Wp)."""
+        h, w = features.shape[-2:]
         with amp:
             x = _assemble(features, mask, 2**self.config.levels, self.config.channels_last, should_stop,
                           torch.bfloat16 if bfloat16 else None)  # (B, C_in+1, Hp, Wp)
+            padded = tuple(x.shape[-2:])
             skips: List[torch.Tensor] = []
             for skip, down in zip(self.skips, self.downs):
                 skips.append(_layer(skip, x, should_stop))
@@ -551,22 +590,7 @@ class UNetDecoder(nn.Module):
                     gain = self.config.transform_gain
                     coefficients = _layer(self.transform, coarse * gain if gain != 1.0 else coarse,
                                           should_stop).to(features.dtype)
-        rgb = torch.sigmoid(y[:, :3])  # (B, 3, H, W)
-        texture = TEXTURE_SCALE * torch.tanh(y[:, 3:]) if self.config.texture_channels else None
-        if self.transform is not None:
-            padded = (coarse.shape[-2] * 2**self.config.levels, coarse.shape[-1] * 2**self.config.levels)
-            _stop(should_stop)
-            if detail is not None:  # the U-Net's outputs at the decoding size, upsampled to the detail's
-                colours, mask = detail
-                out_size = tuple(colours.shape[-2:])
-                rgb = upsample_to(rgb, out_size)
-                if texture is not None:
-                    texture = upsample_to(texture, out_size)
-                if coefficients.shape[-2:] != (1, 1):
-                    coefficients = upsample_to(coefficients, padded)[..., :h, :w]
-                padded = out_size
-            rgb = apply_colour_transform(rgb, colours, mask, coefficients, padded, texture)
-        return rgb.contiguous()
+        return y, coefficients, padded
 
     def _check_detail(self, features: torch.Tensor, detail) -> Tuple[torch.Tensor, torch.Tensor]:
         if self.transform is None:

@@ -209,7 +209,7 @@ class Stylize3DModel(nn.Module):
     def render_view(
         self, dense: torch.Tensor, xyz: torch.Tensor, camera: Cameras, height: int, width: int,
         supersample: int = 1, should_stop: Optional[Callable[[], bool]] = None, *,
-        decode_scale: int = 1, bfloat16: bool = False, features_finite: bool = False,
+        decode_scale: int = 1, bfloat16: bool = False, features_finite: bool = False, runtime=None,
     ) -> Tuple[torch.Tensor, Fragments]:
         """Decode one view: (3, H, W) RGB in (0, 1) and the rasterizer's fragments.
 
@@ -228,22 +228,25 @@ class Stylize3DModel(nn.Module):
 
         ``features_finite``: the caller has checked that ``dense`` is finite (the rasterizer does not sum
         it again; see :func:`~stylize3d_core.render.rasterize.rasterize_points`).
+
+        ``runtime``: the decoder's U-Net in ONNX Runtime
+        (:func:`~stylize3d_core.models.decoder_onnx.onnx_unet`; float32 inference), or None: torch.
         """
         if isinstance(decode_scale, bool) or not isinstance(decode_scale, int) or not 1 <= decode_scale <= 8:
             raise InputError("decode_scale", f"must be an integer from 1 to 8, got {decode_scale!r}")
         settings = RasterSettings(height=int(height), width=int(width), supersample=supersample)
         if decode_scale > 1:
             return self._render_split(dense, xyz, camera, settings, decode_scale, should_stop, bfloat16,
-                                      features_finite)
+                                      features_finite, runtime)
         frags = PointRasterizer(settings)(xyz, dense, camera, should_stop=should_stop, features_finite=features_finite)
         features = frags.image.unsqueeze(0)  # (1, Cr, H, W)
         mask = (~frags.hole).to(features.dtype)[None, None]  # (1, 1, H, W)
-        rgb = self.decoder(features, mask, should_stop=should_stop, bfloat16=bfloat16)[0]  # (3, H, W)
+        rgb = self.decoder(features, mask, should_stop=should_stop, bfloat16=bfloat16, runtime=runtime)[0]  # (3, H, W)
         return rgb, frags
 
     def _render_split(self, dense: torch.Tensor, xyz: torch.Tensor, camera: Cameras, settings: RasterSettings,
                       scale: int, should_stop, bfloat16: bool = False,
-                      features_finite: bool = False) -> Tuple[torch.Tensor, Fragments]:
+                      features_finite: bool = False, runtime=None) -> Tuple[torch.Tensor, Fragments]:
         """``render_view`` with split-resolution decoding (``decode_scale`` > 1)."""
         d = self.config.decoder.transform_channels
         if not d or self.config.decoder.supersample:
@@ -254,7 +257,7 @@ class Stylize3DModel(nn.Module):
         coverage = (~frags.hole).to(image.dtype)[None, None]  # (1, 1, H, W)
         features, mask = pool_features(image, coverage, scale)  # (1, Cr + D, h, w), (1, 1, h, w)
         rgb = self.decoder(features, mask, should_stop=should_stop, detail=(image[:, -d:], coverage),
-                           bfloat16=bfloat16)[0]
+                           bfloat16=bfloat16, runtime=runtime)[0]
         return rgb, frags
 
 
