@@ -15,7 +15,7 @@ leaving the first / last convolutions in float32; per variant, the PSNR of whole
 the four sample photos (cameras not used in the calibration) against the float32 frames, and the time.
 (Rejected as a default: see the figures it prints; ``docs/performance.md``.)
 
-    .venv/bin/python benchmarks/bench_decoder_runtime.py [--repeats 7] [--stylized] [--int8]
+    .venv/bin/python benchmarks/bench_decoder_runtime.py [--repeats 7] [--stylized] [--int8] [--no-unet]
 """
 
 from __future__ import annotations
@@ -129,6 +129,8 @@ def int8(threads: int = 2) -> None:
     pairs = [("coffee.jpg", "painting_style03_coffee.jpg"), ("rocket.jpg", "texture_voronoi_seed7.jpg"),
              ("chelsea.jpg", "painting_style13_rocket.jpg"), ("astronaut.jpg", "painting_style19_chelsea.jpg")]
     scenes = [(p, *_scene(p, s, 1024)) for p, s in pairs]
+    for _, st, _ in scenes:  # every frame through ONNX Runtime (auto would decode the small ones in torch)
+        st.settings = replace(st.settings, decoder_runtime="onnxruntime")
     fp32 = onnx_unet(scenes[0][1].model.decoder)
     captured = []
     real = decoder_onnx.onnx_unet
@@ -196,8 +198,10 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--stylized", action="store_true", help="also whole stylized frames")
     ap.add_argument("--int8", action="store_true", help="also the int8 experiment")
+    ap.add_argument("--no-unet", action="store_true", help="without part 1 (the U-Net alone)")
     args = ap.parse_args()
-    unet_alone(args.repeats)
+    if not args.no_unet:
+        unet_alone(args.repeats)
     if args.stylized:
         stylized(args.repeats)
     if args.int8:

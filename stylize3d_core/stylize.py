@@ -90,10 +90,11 @@ class StylizeSettings:
             bfloat16 natively (:func:`~stylize3d_core.models.decoder.native_bfloat16`: AVX-512 BF16 or
             AMX), float32 elsewhere; True or False forces it. The rasterizer, the encoder, the stylizer and
             the palette map stay float32; bfloat16 frames are 55-61 dB PSNR from float32 ones (``bench speed``).
-        decoder_runtime: what runs the decoder's U-Net in float32: "auto" (default: ONNX Runtime where it
-            imports, else torch), "onnxruntime" or "torch". ONNX Runtime gives the same frames within ~1e-6
-            and decodes ~1.4x faster on AVX2 CPUs (:mod:`~stylize3d_core.models.decoder_onnx`). bfloat16
-            decoding always runs in torch.
+        decoder_runtime: what runs the decoder's U-Net in float32: "auto" (default: ONNX Runtime for large
+            frames, where it imports, torch for small ones, :func:`~stylize3d_core.models.decoder_onnx.prefers_onnx`),
+            "onnxruntime" or "torch". ONNX Runtime gives the same frames within ~2e-6 and decodes a 768x512
+            frame ~1.3x faster on this AVX2 CPU, a 256-px preview ~1.1x slower
+            (:mod:`~stylize3d_core.models.decoder_onnx`). bfloat16 decoding always runs in torch.
         border_margin: pixels rendered beyond each side of a full frame and cut off (default 8; 0: none).
             The U-Net's zero padding makes its outermost ~8 pixels differ from what it decodes inside a
             frame (up to ~20 levels at the edge: a visible coloured rim); with the margin, the frame's edge
@@ -143,13 +144,15 @@ class StylizeSettings:
         """Whether the decoder runs in bfloat16: ``bfloat16``, or where None, the CPU's native support."""
         return native_bfloat16() if self.bfloat16 is None else self.bfloat16
 
-    @property
-    def decode_onnx(self) -> bool:
-        """Whether ONNX Runtime runs the U-Net: float32 decoding, and ``decoder_runtime`` "onnxruntime", or
-        "auto" where it imports."""
+    def decode_onnx(self, pixels: Optional[int] = None) -> bool:
+        """Whether ONNX Runtime runs the U-Net of a frame of ``pixels`` (None: a large one): float32 decoding,
+        and ``decoder_runtime`` "onnxruntime", or "auto" where it imports and the frame is large enough for
+        this thread's thread count (:func:`~stylize3d_core.models.decoder_onnx.prefers_onnx`)."""
         if self.decode_bfloat16 or self.decoder_runtime == "torch":
             return False
-        return self.decoder_runtime == "onnxruntime" or decoder_onnx.available()
+        if self.decoder_runtime == "onnxruntime":
+            return True
+        return decoder_onnx.available() and (pixels is None or decoder_onnx.prefers_onnx(pixels))
 
 
 def style_tensor(style_rgb: np.ndarray, name: str = "style image") -> torch.Tensor:
@@ -489,7 +492,8 @@ class Stylized3DPhoto:
         keep = n if per_pixel is None else self._strata.prefix(
             preview_point_count(n, (height + 2 * m) * ss, (width + 2 * m) * ss, per_pixel))
         split = {} if scale == 1 else {"decode_scale": scale}
-        runtime = decoder_onnx.onnx_unet(self.model.decoder) if st.decode_onnx else None
+        decoded = -(-(height + 2 * m) // scale) * -(-(width + 2 * m) // scale)  # the U-Net's pixels
+        runtime = decoder_onnx.onnx_unet(self.model.decoder) if st.decode_onnx(decoded) else None
         with torch.inference_mode():
             if should_stop is not None and should_stop():
                 raise RenderInterrupted("render stopped before rasterizing")

@@ -390,22 +390,34 @@ def test_bfloat16_decoding_setting(stylized):
 
 
 def test_decoder_runtime_setting(stylized):
-    """ONNX Runtime (the default where it imports) and torch give the same frames and previews."""
+    """ONNX Runtime (the default for large frames where it imports) and torch give the same frames and previews."""
     from dataclasses import replace
+
+    from stylize3d_core.models.decoder_onnx import AUTO_PIXELS_PER_THREAD, onnx_threads
+    from stylize3d_core.threads import torch_threads
 
     cam = Cameras.identity(stylized.photo.fov_y_deg)
     moved = Cameras.create(np.array([[1, 0, 0, 0.05], [0, 1, 0, 0.02], [0, 0, 1, 0], [0, 0, 0, 1]], np.float32)[None],
                            stylized.photo.fov_y_deg)
     before = stylized.settings
-    assert before.decoder_runtime == "auto" and before.decode_onnx
+    assert before.decoder_runtime == "auto" and before.decode_onnx()
+    with torch_threads(2):
+        with onnx_threads(1):  # auto: ONNX Runtime for large frames only
+            assert before.decode_onnx(AUTO_PIXELS_PER_THREAD) and not before.decode_onnx(AUTO_PIXELS_PER_THREAD - 1)
+        with onnx_threads(2):
+            assert not before.decode_onnx(AUTO_PIXELS_PER_THREAD) and before.decode_onnx(2 * AUTO_PIXELS_PER_THREAD)
+    with torch_threads(1), onnx_threads(2):  # more threads than torch's: ONNX Runtime at any size
+        assert before.decode_onnx(1)
+    assert not replace(before, decoder_runtime="torch").decode_onnx()
+    assert replace(before, decoder_runtime="onnxruntime").decode_onnx(1)
     out = {}
     try:
         for runtime in ("torch", "onnxruntime"):
             stylized.settings = replace(before, decoder_runtime=runtime)
-            assert stylized.settings.decode_onnx == (runtime == "onnxruntime")
+            assert stylized.settings.decode_onnx(48 * 64) == (runtime == "onnxruntime")
             out[runtime] = [stylized.render(c, 48, 64, preview=p) for c in (cam, moved) for p in (False, True)]
         stylized.settings = replace(before, decoder_runtime="onnxruntime", bfloat16=True)
-        assert not stylized.settings.decode_onnx  # bfloat16 decoding is torch's
+        assert not stylized.settings.decode_onnx()  # bfloat16 decoding is torch's
     finally:
         stylized.settings = before
     for a, b in zip(out["torch"], out["onnxruntime"]):

@@ -1,9 +1,11 @@
 """The decoder's U-Net run by ONNX Runtime (CPU inference; the torch decoder stays the reference and trains).
 
-On CPUs without native bfloat16 the U-Net is most of a stylized frame's time, and ONNX Runtime's
-convolutions (MLAS, blocked NCHWc layout, activation fused into the convolution) run it faster than
-torch's oneDNN in float32: a 784x528 U-Net took ~0.72 s on one AVX2 thread against torch's ~1.03 s, ~0.39
-against ~0.59 s on two (``benchmarks/bench_decoder_runtime.py``), with the same outputs within ~1e-6.
+On CPUs without native bfloat16 the U-Net is most of a stylized frame's time, and on large frames ONNX
+Runtime's convolutions (MLAS, blocked NCHWc layout, activation fused into the convolution) run it faster
+than torch's oneDNN in float32: the viewer's 768x512 frame (784x528 with its margins) took 840 ms on one
+AVX2 thread against torch's 1116 ms, 452 against 605 ms on two, with the same outputs within ~1e-6; on
+small frames torch is faster (a 256-px preview 95 against 88 ms), so ``decoder_runtime="auto"`` picks by
+the frame's size (:func:`prefers_onnx`; ``benchmarks/bench_decoder_runtime.py``).
 
 **The graph** is written here, node by node, from the :class:`~.decoder.UNetDecoder`'s weights with
 ``onnx.helper`` (no tracing: the layout is the decoder's own, see its module docstring):
@@ -204,7 +206,7 @@ class OnnxUNet:
         if x.dim() != 4 or x.shape[-2] % m or x.shape[-1] % m:
             raise InputError("x", f"expected (B, C, H, W) with H and W multiples of {m}, got {tuple(x.shape)}")
         feed = {"x_nhwc": x.detach().to(torch.float32).permute(0, 2, 3, 1).contiguous().numpy()}
-        sess = self.session(threads or getattr(_LOCAL, "threads", None) or torch.get_num_threads())
+        sess = self.session(threads or decode_threads())
         if should_stop is None:
             return self._outputs(sess.run(None, feed))
         if should_stop():
@@ -281,6 +283,28 @@ def onnx_threads(n: Optional[int]) -> Iterator[None]:
         yield
     finally:
         _LOCAL.threads = before
+
+
+AUTO_PIXELS_PER_THREAD = 120_000
+"""``decoder_runtime="auto"`` runs ONNX Runtime for frames of at least this many (padded) pixels per thread
+(:func:`prefers_onnx`), torch below: ONNX Runtime's lead grows with the frame, torch (oneDNN) is faster on
+small ones. ``benchmarks/bench_decoder_runtime.py``, the shipped U-Net on this AVX2 machine (torch / ONNX
+Runtime ms): one thread 264x180 88 / 95, 528x360 442 / 366, 784x528 1116 / 840; two threads 528x360 192 /
+206, 784x528 605 / 452."""
+
+
+def decode_threads() -> int:
+    """The ONNX Runtime threads a run on this thread gets: :func:`onnx_threads`' count, else torch's."""
+    return getattr(_LOCAL, "threads", None) or torch.get_num_threads()
+
+
+def prefers_onnx(pixels: int) -> bool:
+    """Whether ONNX Runtime decodes a frame of ``pixels`` (padded) faster than torch on this thread: where
+    :func:`onnx_threads` gives it more threads than torch has, always (two ONNX Runtime threads beat one
+    torch thread at every size measured: 57 against 88 ms at 264x180); else from
+    :data:`AUTO_PIXELS_PER_THREAD` pixels per thread."""
+    threads = decode_threads()
+    return threads > torch.get_num_threads() or pixels >= AUTO_PIXELS_PER_THREAD * threads
 
 
 _RUNTIMES: "weakref.WeakKeyDictionary[UNetDecoder, OnnxUNet]" = weakref.WeakKeyDictionary()
