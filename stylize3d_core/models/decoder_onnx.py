@@ -9,7 +9,8 @@ the frame's size (:func:`prefers_onnx`; ``benchmarks/bench_decoder_runtime.py``)
 
 **The graph** is written here, node by node, from the :class:`~.decoder.UNetDecoder`'s weights with
 ``onnx.helper`` (no tracing: the layout is the decoder's own, see its module docstring):
-``[features | mask]`` (B, C_in + 1, Hp, Wp), padded to a multiple of ``2**levels`` -> ``y`` (B, 3 + texture,
+``x_nhwc``, ``[features | mask]`` channels-last (B, Hp, Wp, C_in + 1) as the rasterizer lays them out,
+padded to a multiple of ``2**levels`` (a ``Transpose`` node makes it NCHW) -> ``y`` (B, 3 + texture,
 Hp, Wp), the last convolution's output before the sigmoid / tanh, and, where the colour-transform head is
 not constant (:func:`~.decoder.constant_transform`), ``coefficients`` (B, 12, Hp / 2**levels, Wp /
 2**levels), the head's output (its input gain folded into its weights). The torch decoder does the rest
@@ -52,7 +53,7 @@ CHANNEL_BLOCK = 8
 """Output-channel groups are multiples of this (MLAS's NCHWc block on AVX2)."""
 
 POLL_S = 0.002
-"""How often the watcher of a stoppable run calls ``should_stop`` (seconds)."""
+"""How often :meth:`OnnxUNet.run` calls ``should_stop`` while a stoppable run goes on (seconds)."""
 
 
 def _groups(out_channels: int, macs_per_pixel: float) -> int:
@@ -164,7 +165,8 @@ def _fingerprint(module: nn.Module) -> Tuple:
 class OnnxUNet:
     """The U-Net of one decoder in ONNX Runtime: :meth:`run`. One session per thread count (made at first use).
 
-    Not for several threads at once (like the torch decoder: one render at a time)."""
+    Call it from one thread at a time (like the torch decoder: one render at a time); a run abandoned by a
+    stop may still be ending beside the next one, which ONNX Runtime's sessions allow."""
 
     def __init__(self, decoder: UNetDecoder) -> None:
         self.levels = decoder.config.levels
