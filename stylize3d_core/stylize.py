@@ -145,14 +145,13 @@ class StylizeSettings:
         return native_bfloat16() if self.bfloat16 is None else self.bfloat16
 
     def decode_onnx(self, pixels: Optional[int] = None) -> bool:
-        """Whether ONNX Runtime runs the U-Net of a frame of ``pixels`` (None: a large one): float32 decoding,
-        and ``decoder_runtime`` "onnxruntime", or "auto" where it imports and the frame is large enough for
-        this thread's thread count (:func:`~stylize3d_core.models.decoder_onnx.prefers_onnx`)."""
-        if self.decode_bfloat16 or self.decoder_runtime == "torch":
+        """Whether ONNX Runtime runs the U-Net of a frame of ``pixels`` (None: a large one): float32 decoding
+        where ONNX Runtime imports and has not failed (:func:`~stylize3d_core.models.decoder_onnx.available`),
+        and ``decoder_runtime`` "onnxruntime", or "auto" and a frame large enough for this thread's thread
+        count (:func:`~stylize3d_core.models.decoder_onnx.prefers_onnx`)."""
+        if self.decode_bfloat16 or self.decoder_runtime == "torch" or not decoder_onnx.available():
             return False
-        if self.decoder_runtime == "onnxruntime":
-            return True
-        return decoder_onnx.available() and (pixels is None or decoder_onnx.prefers_onnx(pixels))
+        return self.decoder_runtime == "onnxruntime" or pixels is None or decoder_onnx.prefers_onnx(pixels)
 
 
 def style_tensor(style_rgb: np.ndarray, name: str = "style image") -> torch.Tensor:

@@ -540,10 +540,19 @@ class UNetDecoder(nn.Module):
         # bfloat16: the U-Net's convolutions under the autocast, from an input assembled in bfloat16;
         # its outputs back in float32 for the heads (sigmoid, tanh, the per-pixel colour matrices)
         amp = torch.autocast("cpu", dtype=torch.bfloat16) if bfloat16 else contextlib.nullcontext()
+        unet = None
         if runtime is not None:
             x = _assemble(features, mask, 2**self.config.levels, True, should_stop)  # NHWC, as the graph takes it
+            try:
+                unet = runtime.run(x, should_stop)
+            except RenderInterrupted:
+                raise
+            except Exception as exc:  # noqa: BLE001 (onnxruntime's own errors): this frame and the next in torch
+                from .decoder_onnx import disable
+                disable(exc)
+        if unet is not None:
+            y, coefficients = unet
             padded = tuple(x.shape[-2:])
-            y, coefficients = runtime.run(x, should_stop)
             y = y[..., :h, :w]
             if self.transform is not None and coefficients is None:
                 coefficients = constant_transform(self.transform)

@@ -32,6 +32,7 @@ from __future__ import annotations
 import atexit
 import contextlib
 import threading
+import warnings
 import weakref
 from typing import Callable, Dict, Iterator, List, Optional, Tuple
 
@@ -323,11 +324,28 @@ def onnx_unet(decoder: UNetDecoder) -> OnnxUNet:
         return rt
 
 
+ENABLED = True
+"""False after :func:`disable`: ``decoder_runtime="auto"`` decodes in torch."""
+
+
 def available() -> bool:
-    """True where onnx and onnxruntime import (both are dependencies of the package)."""
+    """True where onnx and onnxruntime import (both are dependencies of the package) and no run failed
+    (:func:`disable`)."""
+    if not ENABLED:
+        return False
     try:
         import onnx  # noqa: F401
         import onnxruntime  # noqa: F401
     except Exception:  # noqa: BLE001
         return False
     return True
+
+
+def disable(exc: BaseException) -> None:
+    """ONNX Runtime failed to run the U-Net (an error that is not a stop): warn once, and let "auto" decode
+    in torch from now on (the decoder reruns the failed frame in torch)."""
+    global ENABLED
+    if ENABLED:
+        ENABLED = False
+        warnings.warn(f"stylize3d: ONNX Runtime failed to run the decoder ({type(exc).__name__}: {exc}); "
+                      "decoding in torch from now on", RuntimeWarning, stacklevel=3)

@@ -189,3 +189,22 @@ def test_bad_uses():
             rt.run(torch.zeros(1, 12, 10, 8))
     with pytest.raises(InputError, match="supersampling"):
         unet_graph(UNetDecoder(DecoderConfig(in_channels=4, width=8, supersample=True)))
+
+
+def test_a_failing_runtime_falls_back_to_torch(monkeypatch):
+    """An ONNX Runtime error (not a stop) warns once, the frame is decoded in torch, and "auto" stays off."""
+    dec = _decoder()
+    rt = OnnxUNet(dec)
+    feats, mask = _inputs(12, 16, 11)
+
+    def broken(*a, **k):
+        raise RuntimeError("no kernel for this CPU")
+
+    monkeypatch.setattr(rt, "run", broken)
+    monkeypatch.setattr(decoder_onnx, "ENABLED", True)
+    with torch.inference_mode():
+        ref = dec(feats, mask)
+        with pytest.warns(RuntimeWarning, match="decoding in torch"):
+            out = dec(feats, mask, runtime=rt)
+    assert torch.equal(out, ref)
+    assert not decoder_onnx.available()
