@@ -146,6 +146,14 @@ class RenderStateMachine:
         self._level = 0
         return Change(self.version, interrupt)
 
+    def retarget(self, levels: Sequence[float]) -> None:
+        """Use ``levels`` for the current version's full frame, while it is not requested yet (MOVING): a
+        mouse release is a rest without the rest delay, so the caller chooses the levels for a larger
+        budget there. Elsewhere nothing changes."""
+        levels = check_levels(levels)
+        if self.phase is RenderPhase.MOVING:
+            self._levels, self._level = levels, 0
+
     def full_due(self, now: float, holding: bool = False) -> bool:
         """True once MOVING has rested ``rest_delay_s`` (``hold_delay_s`` while ``holding``: the mouse
         button is still down, a drag may go on; a busy GUI thread delivers its moves in bursts, and a

@@ -137,6 +137,7 @@ class ViewerWindow:
         self.script_thread: Optional[threading.Thread] = None
         self._preview_side = self.preview.preview_long_side
         self._last_level: Optional[Tuple[float, float]] = None  # (scale, seconds) of the last first level
+        self._last_full_s: Optional[float] = None  # seconds of the last full-size frame
         self._preview_times: deque = deque(maxlen=PREVIEW_SAMPLES)  # (long side, seconds) of the last previews
         self._display_hw: Tuple[int, int] = (0, 0)
         self._shown_generation = 0
@@ -285,9 +286,14 @@ class ViewerWindow:
         """What a full-quality frame (or the first level of one) may take: the budget from rest to a sharp
         frame (``PreviewSettings.full_budget_s``) less the rest delay that comes before it and the preview
         it may have to wait for (the median of the recent previews' times)."""
+        return max(0.05, self.release_budget_s - self.preview.rest_delay_s)
+
+    @property
+    def release_budget_s(self) -> float:
+        """The same after a mouse release, which is a rest at once (no rest delay before the full frame)."""
         waits = [sec for _, sec in self._preview_times]
         preview_s = float(np.median(waits)) if waits else 0.0
-        return max(0.05, self.preview.full_budget_s - self.preview.rest_delay_s - preview_s)
+        return max(0.05, self.preview.full_budget_s - preview_s)
 
     @property
     def display_hw(self) -> Tuple[int, int]:
@@ -631,6 +637,7 @@ class ViewerWindow:
             st["full_shown"].append(time.monotonic())
             st["full_sizes"].append(list(frame.rendered_size))
             st["full_latency"].append(latency)
+            self._last_full_s = res.seconds
             self.scheduler.levels = refine_levels(res.seconds, self.full_render_budget_s, self._last_level)  # next rest
         st["interrupted"] = [self.worker.interrupted]
         for value in st.values():
@@ -723,6 +730,8 @@ class ViewerWindow:
         if e.type == T.BUTTON_UP:
             self._drag = None
             if self.scheduler.phase is RenderPhase.MOVING and self.state.playback is None:
+                if self._last_full_s is not None:  # levels for the release's budget: no rest delay comes first
+                    self.scheduler.retarget(refine_levels(self._last_full_s, self.release_budget_s, self._last_level))
                 self.request_render(preview=False)  # the release is the rest: the full-quality frame now (it
             return gui.Widget.EventCallbackResult.CONSUMED  # replaces a waiting preview of the same pose)
         if e.type == T.WHEEL:

@@ -186,16 +186,20 @@ class DecoderConfig:
     @classmethod
     def lite(cls, in_channels: int = 64, supersample: bool = False, transform_channels: int = 0,
              texture_channels: int = 0) -> "DecoderConfig":
-        """CPU decoder for the viewer: width 96 (24 channels at full resolution), 2 levels.
+        """CPU decoder for the viewer: width 64 (16 channels at full resolution), 2 levels.
 
-        Chosen with ``benchmarks/bench_decoder.py`` (C_in = 64, widths 64/96/128/192,
-        i.e. 16/24/32/48 channels at full resolution) as the widest width that decodes
-        512^2 in <= 0.5 s and 256^2 in <= 0.1 s on 2 cores with >= 30 % headroom:
-        width 96 took ~230-290 ms at 512^2 and ~37-52 ms at 256^2 in quiet runs,
-        width 128 ~340 ms at 512^2 at best (no headroom).
+        First chosen with ``benchmarks/bench_decoder.py`` (C_in = 64, widths 64/96/128/192,
+        i.e. 16/24/32/48 channels at full resolution) as width 96, the widest that decoded 512^2 in
+        <= 0.5 s and 256^2 in <= 0.1 s on 2 cores with >= 30 % headroom on the AVX-512 machine of the
+        first sessions. On the AVX2 machine of sessions 17-19 (float32 only) width 96 missed the 60 ms
+        preview and the viewer's 0.5 s full frame; version 8 of the model has width 64: its decoder
+        distilled from version 7's and trained on (``tools/distill_decoder.py``), the same quality figures
+        (``docs/quality.md``) for 2.2x fewer multiply-adds (33.6k per pixel against 72.6k): a 784x528
+        U-Net in 283 against 473 ms on two threads (ONNX Runtime), a 264x180 one in 25 against 45 ms
+        (torch).
         """
-        return cls(in_channels=in_channels, width=96, levels=2, supersample=supersample,
-                   transform_channels=transform_channels, transform_gain=1.0 / 96, texture_channels=texture_channels)
+        return cls(in_channels=in_channels, width=64, levels=2, supersample=supersample,
+                   transform_channels=transform_channels, transform_gain=1.0 / 64, texture_channels=texture_channels)
 
 
 def pad_to_multiple(x: torch.Tensor, multiple: int) -> torch.Tensor:

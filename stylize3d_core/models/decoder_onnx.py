@@ -3,8 +3,9 @@
 On CPUs without native bfloat16 the U-Net is most of a stylized frame's time, and on large frames ONNX
 Runtime's convolutions (MLAS, blocked NCHWc layout, activation fused into the convolution) run it faster
 than torch's oneDNN in float32: the viewer's 768x512 frame (784x528 with its margins) took 840 ms on one
-AVX2 thread against torch's 1116 ms, 452 against 605 ms on two, with the same outputs within ~1e-6; on
-small frames torch is faster (a 256-px preview 95 against 88 ms), so ``decoder_runtime="auto"`` picks by
+AVX2 thread against torch's 1116 ms with version 7's U-Net (width 96), 452 against 605 ms on two, and
+449 against 530 ms, 283 against 320 ms with version 8's (width 64), the same outputs within ~1e-6; on
+small frames torch is faster (a 256-px preview 95 against 88 ms, version 7), so ``decoder_runtime="auto"`` picks by
 the frame's size (:func:`prefers_onnx`; ``benchmarks/bench_decoder_runtime.py``).
 
 **The graph** is written here, node by node, from the :class:`~.decoder.UNetDecoder`'s weights with
@@ -291,9 +292,10 @@ def onnx_threads(n: Optional[int]) -> Iterator[None]:
 AUTO_PIXELS_PER_THREAD = 120_000
 """``decoder_runtime="auto"`` runs ONNX Runtime for frames of at least this many (padded) pixels per thread
 (:func:`prefers_onnx`), torch below: ONNX Runtime's lead grows with the frame, torch (oneDNN) is faster on
-small ones. ``benchmarks/bench_decoder_runtime.py``, the shipped U-Net on this AVX2 machine (torch / ONNX
-Runtime ms): one thread 264x180 88 / 95, 528x360 442 / 366, 784x528 1116 / 840; two threads 528x360 192 /
-206, 784x528 605 / 452."""
+small ones. ``benchmarks/bench_decoder_runtime.py``, version 7's U-Net (width 96) on this AVX2 machine (torch /
+ONNX Runtime ms): one thread 264x180 88 / 95, 528x360 442 / 366, 784x528 1116 / 840; two threads 528x360 192 /
+206, 784x528 605 / 452. Version 8's (width 64): one thread 264x180 47 / 48, 784x528 530 / 449; two threads
+264x180 25 / 32, 784x528 320 / 283."""
 
 
 def decode_threads() -> int:

@@ -128,7 +128,7 @@ class ModelConfig:
     @classmethod
     def lite(cls) -> "ModelConfig":
         """CPU configuration: encoder 32/64/128, AdaAttN 128 (q/k 64), 32 raster channels + the RGB detail
-        path with its colour transform and texture residual, decoder width 96."""
+        path with its colour transform and texture residual, decoder width 64 (96 until version 8 of the model)."""
         return cls()
 
     @classmethod

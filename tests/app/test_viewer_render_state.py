@@ -116,3 +116,19 @@ def test_first_level_fits_the_budget_from_measured_times():
     assert level_cost_model((1.0, 1.0), (0.5, 2.0)) is None and level_cost_model((1.0, 1.0), (1.0, 0.5)) is None
     assert refine_levels(2.0, 0.5, (0.5, 3.0)) == (0.5, 1.0)
     assert refine_levels(2.0, 0.5, (0.5, float("inf"))) == (0.5, 1.0)
+
+
+def test_retarget_changes_the_levels_of_a_full_frame_not_yet_requested():
+    s = RenderStateMachine(rest_delay_s=0.15, levels=(0.5, 1.0))
+    s.changed(1.0)
+    s.retarget((1.0,))  # a release: a larger budget, one level
+    assert s.full_scale == 1.0 and s.full_level == (0, 1)
+    s.full_requested()
+    s.retarget((0.25, 1.0))  # requested: nothing changes
+    assert s.full_level == (0, 1)
+    assert not s.shown(s.version, preview=False, scale=1.0) and s.settled
+    assert s.levels == (0.5, 1.0)  # the next change takes the levels chosen for rests
+    s.changed(2.0)
+    assert s.full_scale == 0.5
+    with pytest.raises(InputError):
+        s.retarget((0.5,))
