@@ -28,7 +28,7 @@ from stylize3d_core.depth.types import DepthMap  # noqa: E402
 from stylize3d_core.geometry.camera import NEAR_DEPTH  # noqa: E402
 from stylize3d_core.render.plain import PlainRenderer  # noqa: E402
 from stylize3d_core.scene.photo3d import Photo3D, Photo3DSettings  # noqa: E402
-from stylize3d_core.train.procedural import ray_cast, visible_from  # noqa: E402
+from stylize3d_core.train.procedural import ray_cast  # noqa: E402
 
 
 def main() -> None:
@@ -37,7 +37,6 @@ def main() -> None:
     ap.add_argument("--truth-samples", type=int, nargs="+", default=[3, 6, 8])
     args = ap.parse_args()
     H, W, fov = scenes.H, scenes.W, scenes.FOV
-    f = 0.5 * H / math.tan(math.radians(fov) / 2.0)
     print(f"disoccluded PSNR (dB); photo ray-cast at {args.photo_samples}x{args.photo_samples} rays per pixel")
     print(f"{'scene':18s} {'move':18s} " + " ".join(f"truth {s}x{s}".rjust(11) for s in args.truth_samples))
     for name, make in scenes.SCENES.items():
@@ -52,12 +51,7 @@ def main() -> None:
             row = []
             for samples in args.truth_samples:
                 truth = ray_cast(scene, scenes.camera(t), H, W, samples=samples)
-                pts = truth.points.reshape(-1, 3)
-                seen = visible_from(scene, pts, scenes.camera((0, 0, 0)), H, W).reshape(H, W)
-                z = np.maximum(pts[:, 2], 1e-9)
-                u, v = f * pts[:, 0] / z + W / 2, f * pts[:, 1] / z + H / 2
-                in_frame = ((pts[:, 2] > 1e-9) & (u >= 0) & (u < W) & (v >= 0) & (v < H)).reshape(H, W)
-                hidden = truth.hit & ~seen & in_frame
+                _, hidden, _ = scenes.regions(scene, truth)
                 row.append(scenes.psnr(got[hidden], truth.rgb[hidden]) if hidden.mean() > 5e-4 else math.nan)
             print(f"{name:18s} {move:18s} " + " ".join(f"{p:11.2f}" for p in row), flush=True)
 

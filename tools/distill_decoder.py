@@ -35,6 +35,7 @@ import torch.nn.functional as F
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from stylize3d_core.bench.speed import psnr as speed_psnr  # noqa: E402
 from stylize3d_core.io.atomic import atomic_path  # noqa: E402
 from stylize3d_core.models.checkpoint import load_checkpoint, save_checkpoint  # noqa: E402
 from stylize3d_core.models.colour_transfer import lab_stats, transfer_colours  # noqa: E402
@@ -94,8 +95,7 @@ def loss_fn(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
 
 
 def psnr(a: torch.Tensor, b: torch.Tensor) -> float:
-    mse = float(((a.float() - b.float()) ** 2).mean())
-    return math.inf if mse == 0 else 10 * math.log10(1 / mse)
+    return speed_psnr(a.float().numpy(), b.float().numpy())
 
 
 def main() -> None:

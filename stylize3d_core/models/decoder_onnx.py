@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import atexit
 import contextlib
+import functools
 import threading
 import warnings
 import weakref
@@ -330,17 +331,20 @@ ENABLED = True
 """False after :func:`disable`: ``decoder_runtime="auto"`` decodes in torch."""
 
 
-def available() -> bool:
-    """True where onnx and onnxruntime import (both are dependencies of the package) and no run failed
-    (:func:`disable`)."""
-    if not ENABLED:
-        return False
+@functools.lru_cache(maxsize=None)
+def _importable() -> bool:
     try:
         import onnx  # noqa: F401
         import onnxruntime  # noqa: F401
     except Exception:  # noqa: BLE001
         return False
     return True
+
+
+def available() -> bool:
+    """True where onnx and onnxruntime import (both are dependencies of the package; tried once per process)
+    and no run failed (:func:`disable`). Asked at every render."""
+    return ENABLED and _importable()
 
 
 def disable(exc: BaseException) -> None:

@@ -115,6 +115,19 @@ def psnr(a: np.ndarray, b: np.ndarray) -> float:
     return 10 * math.log10(1.0 / max(float(((a - b) ** 2).mean()), 1e-12))
 
 
+def regions(scene: Scene, truth) -> tuple:
+    """(seen, hidden, outside) (H, W) bool masks of a truth ray-cast from a moved camera: what the photo saw,
+    what lay inside the photo's frame but behind a nearer surface there (the disoccluded pixels), and what
+    lay beyond the photo's frame."""
+    pts = truth.points.reshape(-1, 3)
+    seen = visible_from(scene, pts, camera((0, 0, 0)), H, W).reshape(H, W)
+    f = 0.5 * H / math.tan(math.radians(FOV) / 2.0)
+    z = np.maximum(pts[:, 2], 1e-9)
+    u, v = f * pts[:, 0] / z + W / 2, f * pts[:, 1] / z + H / 2
+    in_frame = ((pts[:, 2] > 1e-9) & (u >= 0) & (u < W) & (v >= 0) & (v < H)).reshape(H, W)
+    return seen, truth.hit & ~seen & in_frame, truth.hit & ~in_frame
+
+
 @pytest.fixture(scope="module", params=list(SCENES))
 def built(request):
     """(name, scene in scene units, renderer of its 3D photo)."""
@@ -133,14 +146,7 @@ def test_disoccluded_regions_match_the_truth(built, move, capsys):
     name, scene, renderer = built
     t = MOVES[move]
     truth = ray_cast(scene, camera(t), H, W, samples=3)
-    pts = truth.points.reshape(-1, 3)
-    seen = visible_from(scene, pts, camera((0, 0, 0)), H, W).reshape(H, W)
-    f = 0.5 * H / math.tan(math.radians(FOV) / 2.0)
-    z = np.maximum(pts[:, 2], 1e-9)
-    u, v = f * pts[:, 0] / z + W / 2, f * pts[:, 1] / z + H / 2
-    in_frame = ((pts[:, 2] > 1e-9) & (u >= 0) & (u < W) & (v >= 0) & (v < H)).reshape(H, W)
-    hidden = truth.hit & ~seen & in_frame  # behind a nearer surface in the photo
-    outside = truth.hit & ~in_frame  # beyond the photo's frame
+    seen, hidden, outside = regions(scene, truth)
     got = renderer.render(camera(t), H, W)
     frags = renderer.rasterize(camera(t), H, W)
     holes = float(frags.hole.float().mean())
