@@ -594,7 +594,7 @@ def test_typed_paths_in_open_dialogs_and_recent_files_kept_between_runs(display,
     steps = [
         {"op": "settings"},
         {"op": "grab_window", "path": str(second / "window.png")},
-        {"op": "sleep", "seconds": 6.0},  # the test opens File > Recent photos > 2 now
+        {"op": "sleep", "seconds": 12.0},  # the test opens File > Recent photos > 2 now
         {"op": "wait_idle", "timeout": 120},
         {"op": "state"},
         {"op": "recent", "kind": "photo", "index": 1},  # dog.jpg (second since cat.jpg opened): deleted
@@ -614,16 +614,22 @@ def test_typed_paths_in_open_dialogs_and_recent_files_kept_between_runs(display,
         dpy = lx.XOpenDisplay(display.encode())
 
         def click(x: float, y: float, press: bool = True) -> None:
-            lt.XTestFakeMotionEvent(dpy, -1, int(x0 + x), int(y0 + y), 0)
-            lx.XFlush(dpy)
-            time.sleep(0.4)
+            # several moves onto the target, as a hand makes, and a press held for more than a GUI frame:
+            # ImGui takes a click on an item only when one frame saw the pointer over it and a later one the
+            # press; on a busy machine (a frame of 0.2 s and more) a single move, the press and the release
+            # fell into one frame and the menu did not open
+            for k in range(6, -1, -1):
+                lt.XTestFakeMotionEvent(dpy, -1, int(x0 + x), int(y0 + y) + k, 0)
+                lx.XFlush(dpy)
+                time.sleep(0.06)
+            time.sleep(0.6)
             if press:
                 lt.XTestFakeButtonEvent(dpy, 1, 1, 0)
                 lx.XFlush(dpy)
-                time.sleep(0.2)
+                time.sleep(0.6)
                 lt.XTestFakeButtonEvent(dpy, 1, 0, 0)
                 lx.XFlush(dpy)
-                time.sleep(0.8)
+                time.sleep(1.0)
 
         try:  # ImGui's menus: items 1.5 em apart below a 1.5 em bar (File's 5th item: Recent photos)
             click(1.4 * em, 0.75 * em)
