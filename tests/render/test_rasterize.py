@@ -301,13 +301,13 @@ def test_image_is_channels_last_view():
 # ----------------------------------------------------------------------------- against the reference
 
 
-def assert_matches_reference(pts, feats, K, settings, generator, point_size=None):
+def assert_matches_reference(pts, feats, K, settings, generator, point_size=None, point_alpha=None):
     """The fast rasterizer equals the reference in every output and in the features' gradient (float64);
     returns the fast fragments."""
     feats_a = feats.clone().requires_grad_(True)
     feats_b = feats.clone().requires_grad_(True)
-    fast = rasterize_points(pts, feats_a, K, settings, point_size=point_size)
-    ref = rasterize_points_reference(pts, feats_b, K, settings, point_size=point_size)
+    fast = rasterize_points(pts, feats_a, K, settings, point_size=point_size, point_alpha=point_alpha)
+    ref = rasterize_points_reference(pts, feats_b, K, settings, point_size=point_size, point_alpha=point_alpha)
     assert torch.allclose(fast.image, ref.image, atol=1e-12)
     assert torch.allclose(fast.weight, ref.weight, atol=1e-12)
     assert torch.equal(fast.depth, ref.depth) and torch.equal(fast.hole, ref.hole)
@@ -685,6 +685,37 @@ def test_blend_coverage_antialiases_a_silhouette(raster):
     assert torch.equal(hard.hole, soft.hole)
 
 
+def test_point_alpha_scales_a_silhouette_points_coverage(raster):
+    """A near point at a pixel's centre with opacity 0.4 over a far point: the pixel shows 0.4 of the near
+    colour over 0.6 of the far one (blend_coverage with point sizes); opaque, the near colour alone;
+    without blend_coverage the opacity is not used. Weight, depth and holes stay the front's."""
+    K = simple_K()
+    pts, _ = scene(K, [(3.5, 3.5, 1.0), (3.5, 3.5, 2.0), (1.5, 1.5, 1.0)], C=1)
+    feats = torch.tensor([[1.0], [0.0], [1.0]], dtype=F64)
+    size = footprint(pts, K, 1.0)
+    alpha = torch.tensor([0.4, 1.0, 0.5], dtype=F64)
+    settings = RasterSettings(6, 8, blend_coverage=True)
+    see = raster(pts, feats, K, settings, point_size=size, point_alpha=alpha)
+    opaque = raster(pts, feats, K, settings, point_size=size)
+    assert float(see.image[0, 3, 3]) == pytest.approx(0.4) and float(opaque.image[0, 3, 3]) == pytest.approx(1.0)
+    assert float(see.image[0, 1, 1]) == pytest.approx(1.0)  # nothing behind: the front alone
+    assert torch.equal(see.weight, opaque.weight) and torch.equal(see.depth, opaque.depth)
+    assert torch.equal(see.hole, opaque.hole)
+    hard = RasterSettings(6, 8)
+    assert torch.equal(raster(pts, feats, K, hard, point_size=size, point_alpha=alpha).image,
+                       raster(pts, feats, K, hard, point_size=size).image)
+
+
+@pytest.mark.parametrize("bad", [torch.full((3,), 1.5, dtype=F64), torch.full((3,), float("nan"), dtype=F64),
+                                 torch.ones(2, dtype=F64), torch.ones(3, dtype=torch.int64)])
+def test_point_alpha_is_checked(bad):
+    K = simple_K()
+    pts, _ = scene(K, [(3.5, 3.5, 1.0), (3.5, 3.5, 2.0), (1.5, 1.5, 1.0)], C=1)
+    with pytest.raises(InputError, match="point_alpha"):
+        rasterize_points(pts, torch.ones(3, 1, dtype=F64), K, RasterSettings(6, 8, blend_coverage=True),
+                         point_size=footprint(pts, K, 1.0), point_alpha=bad)
+
+
 def test_blend_coverage_keeps_a_magnified_surface_opaque(raster):
     """Grown splats of points 2 px apart (half-width 2) cover their pixels fully: the surface behind
     does not show through, though each pixel's weight is ~1/4."""
@@ -710,12 +741,14 @@ def test_blend_coverage_matches_reference_and_chunks(supersample, soft_edges, se
     sizes = footprint(pts, K, 0.5 + 3.0 * torch.rand(pts.shape[0], generator=g, dtype=F64)).nan_to_num(0.01)
     settings = RasterSettings(H, W, supersample=supersample, soft_edges=soft_edges, blend_coverage=True)
     blended = 0
-    for size in (None, sizes):
-        fast = assert_matches_reference(pts, feats, K, settings, g, point_size=size)
+    alpha = (0.1 + 0.9 * torch.rand(pts.shape[0], generator=g, dtype=F64)) * (torch.rand(pts.shape[0], generator=g) < 0.5)
+    alpha = torch.where(alpha > 0, alpha, 1.0)  # half the points partly opaque
+    for size, opacity in ((None, None), (sizes, None), (sizes, alpha)):
+        fast = assert_matches_reference(pts, feats, K, settings, g, point_size=size, point_alpha=opacity)
         with torch.inference_mode():
-            one = rasterize_points(pts, feats, K, settings, point_size=size)
+            one = rasterize_points(pts, feats, K, settings, point_size=size, point_alpha=opacity)
             chunked = rasterize_points(pts, feats, K, settings, point_size=size, chunk_points=7,
-                                       should_stop=lambda: False)
+                                       should_stop=lambda: False, point_alpha=opacity)
         for a, b in zip(one, chunked):
             assert torch.equal(a, b)  # to the bit
         assert torch.allclose(one.image, fast.image, atol=1e-12)  # the inference path too (fast == reference)

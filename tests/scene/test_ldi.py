@@ -443,11 +443,48 @@ def test_bright_foreground_never_colours_the_hidden_layer():
     left = np.linalg.norm(layer0[outside] - dark, axis=1) / np.linalg.norm(bright - dark)  # (K,)
     assert left.max() < 0.05, f"foreground colour left on the wall: {left.max():.3f}"
     assert np.array_equal(photo(ldi, ldi.depth) > 2.0 * ldi.depth_scale, ~near)  # at the wall's depth
-    assert np.array_equal(layer0[~outside], rgb[~outside])  # every other pixel: the photo's own colour
-    # without the unmixing, layer 0 is the photo, mixed edge pixels included
-    kept = build_ldi(rgb, depth, LDISettings(unmix_silhouettes=False))
-    assert np.array_equal(photo(kept, kept.rgb), rgb)
+    # the disc's own silhouette pixels cover part of their pixel (subpixel_silhouettes): only they, and
+    # the wall's pixels beside the disc, differ from the photo
+    partial = photo(ldi, ldi.alpha) < 1.0
+    assert partial.any() and not (partial & ~inner_outline(near)).any()
+    assert np.array_equal(layer0[~outside & ~partial], rgb[~outside & ~partial])
+    # without the unmixing and the partly covering points, layer 0 is the photo, mixed edge pixels included
+    kept = build_ldi(rgb, depth, LDISettings(unmix_silhouettes=False, subpixel_silhouettes=False))
+    assert np.array_equal(photo(kept, kept.rgb), rgb) and kept.alpha is None and kept.offset is None
     assert np.array_equal(kept.hidden_mask, ldi.hidden_mask)
+
+
+def test_silhouette_pixels_cover_their_share_of_the_pixel():
+    """The disc's anti-aliased edge pixels (the depth edge at the colour's, or a pixel outside it so the
+    wall's mostly covered pixels join the disc) become points of the disc's colour whose share of their
+    pixel is the disc's coverage there, moved towards the disc by half of what they do not cover, with
+    the wall behind them; blended over it from the photo's camera they give the photo's colour back."""
+    for grow in (0.0, -1.0):
+        rgb, depth, cover, bright, dark = bright_disc(grow=grow)
+        ldi = build_ldi(rgb, depth)
+        alpha, offset = photo(ldi, ldi.alpha), photo(ldi, ldi.offset)
+        partial = alpha < 1.0
+        a = alpha / (2.0 - alpha)  # the share: alpha = 2 a / (1 + a)
+        edge = partial & (cover > 0.15) & (cover < 0.9)
+        assert edge.sum() > 40
+        miss = np.abs(a[edge] - cover[edge])  # exact where the pixel inwards is wholly the disc's
+        assert np.median(miss) < 0.01 and miss.max() < 0.15, (np.median(miss), miss.max())
+        assert photo(ldi, ldi.hidden_mask)[partial].all()  # the wall behind each of them
+        colour = photo(ldi, ldi.rgb)[edge]
+        away = np.linalg.norm(colour - bright, axis=1) / np.linalg.norm(bright - dark)  # (K,)
+        assert np.median(away) < 0.02 and away.max() < 0.25  # the disc's colour (from a pixel or two in), not the mix
+        # moved by (1 - a) / 2 pixels, towards the disc's centre (100, 100) (the pixel grid's inward
+        # directions: within 45 degrees of it)
+        r, c = np.nonzero(edge)
+        step = np.hypot(offset[r, c, 0], offset[r, c, 1])
+        np.testing.assert_allclose(step, (1.0 - a[edge]) / 2.0, atol=1e-5)
+        towards = np.stack([99.5 - c, 99.5 - r], axis=1)
+        cos = (offset[r, c] * towards).sum(1) / (step * np.hypot(towards[:, 0], towards[:, 1]) + 1e-12)
+        assert cos.min() > 0.7
+        blended = a[edge, None] * colour + (1.0 - a[edge, None]) * photo(ldi, ldi.hidden_rgb)[edge]
+        assert np.abs(blended - rgb[edge]).max() < 0.06
+    off = build_ldi(rgb, depth, LDISettings(subpixel_silhouettes=False))
+    assert off.alpha is None and off.offset is None
 
 
 def test_mostly_foreground_pixels_beyond_the_depth_edge_join_the_foreground():
@@ -463,7 +500,12 @@ def test_mostly_foreground_pixels_beyond_the_depth_edge_join_the_foreground():
     assert joined.sum() > 20
     z0 = photo(ldi, ldi.depth) / ldi.depth_scale  # layer 0's depth in the input's units
     assert np.allclose(z0[joined], 1.0, rtol=1e-4)  # now the disc's
-    assert np.array_equal(photo(ldi, ldi.rgb)[joined], rgb[joined])  # with the photo's colour
+    # with the photo's colour, or where they cover part of their pixel, the disc's (the blend over the
+    # wall behind gives the photo's back: test_silhouette_pixels_cover_their_share_of_the_pixel)
+    whole = photo(ldi, ldi.alpha) == 1.0
+    assert np.array_equal(photo(ldi, ldi.rgb)[joined & whole], rgb[joined & whole])
+    away = np.linalg.norm(photo(ldi, ldi.rgb)[joined & ~whole] - bright, axis=1) / np.linalg.norm(bright - dark)
+    assert away.size and np.median(away) < 0.02 and away.max() < 0.25
     assert photo(ldi, ldi.hidden_mask)[joined].all()  # the wall behind them
     behind = photo(ldi, ldi.hidden_rgb)[joined]
     assert (np.linalg.norm(behind - dark, axis=1) / np.linalg.norm(bright - dark)).max() < 0.05

@@ -106,6 +106,49 @@ def test_select_and_to_tensors():
         pc.select(7)
 
 
+def test_partly_covering_silhouette_points_move_and_keep_their_opacity():
+    """A red square on blue whose right column covers 0.3 of its pixels (anti-aliased): those points sit
+    0.35 px left of their pixel centres (towards the square) with opacity 2 a / (1 + a) and the square's
+    colour; every other point is at its centre and opaque, but the column's ends, which the depth gives
+    the square though they are the wall's colour (the least share); select and to_tensors keep the
+    opacities."""
+    size, lo, hi = 96, 30, 70
+    depth = np.full((size, size), 3.0, np.float32)
+    depth[lo:hi, lo:hi + 1] = 1.0  # the depth edge includes the partly covered column
+    rgb = np.zeros((size, size, 3), np.float32)
+    rgb[..., 2] = 1.0
+    rgb[lo:hi, lo:hi] = [1.0, 0.0, 0.0]
+    rgb[lo + 2:hi - 2, hi] = 0.3 * np.float32([1.0, 0.0, 0.0]) + 0.7 * np.float32([0.0, 0.0, 1.0])
+    ldi = build_ldi(rgb, depth)
+    h, w = ldi.photo_size
+    pc = ldi_to_points(ldi, 45.0)
+    assert pc.alpha is not None and pc.alpha.dtype == np.float32 and pc.alpha.shape == (len(pc),)
+    K = intrinsics_from_fov(45.0, h, w, dtype=torch.float64)
+    orig = pc.select(ORIGINAL)
+    uv, _ = project(torch.from_numpy(orig.xyz).double(), K)
+    uv = uv.numpy().reshape(h, w, 2)
+    v, u = np.mgrid[:h, :w]
+    shift = uv - np.stack([u + 0.5, v + 0.5], axis=2)  # (H, W, 2)
+    alpha = orig.alpha.reshape(h, w)
+    column = (slice(lo + 2, hi - 2), hi)
+    np.testing.assert_allclose(shift[column][:, 0], -0.35, atol=1e-3)  # (1 - 0.3) / 2 towards the square
+    np.testing.assert_allclose(shift[column][:, 1], 0.0, atol=1e-3)
+    np.testing.assert_allclose(alpha[column], 2 * 0.3 / 1.3, atol=1e-4)
+    np.testing.assert_allclose(orig.rgb.reshape(h, w, 3)[column], np.broadcast_to([1.0, 0.0, 0.0], (hi - lo - 4, 3)), atol=1e-4)
+    # the column's ends are the wall's blue at the square's depth: drawn at the least share
+    ends = (np.array([lo, lo + 1, hi - 2, hi - 1]), hi)
+    np.testing.assert_allclose(alpha[ends], 2 * 0.1 / 1.1, atol=1e-4)
+    np.testing.assert_allclose(np.hypot(shift[ends][:, 0], shift[ends][:, 1]), 0.45, atol=1e-3)  # (corners: diagonally)
+    assert (shift[ends][:, 0] < -0.3).all()
+    rest = np.ones((h, w), bool)
+    rest[lo:hi, hi] = False
+    assert np.abs(shift[rest]).max() < 1e-3 and (alpha[rest] == 1.0).all()
+    assert (pc.select(INPAINTED).alpha == 1.0).all()
+    assert torch.equal(pc.to_tensors().alpha, torch.from_numpy(pc.alpha))
+    with pytest.raises(InputError, match="alpha"):
+        PointCloud(pc.xyz, pc.rgb, pc.label, pc.image_size, pc.fov_y_deg, np.zeros(len(pc), np.float32))
+
+
 def test_points_are_finite_and_colours_in_range():
     ldi = square_ldi()
     pc = ldi_to_points(ldi, 90.0)
