@@ -128,9 +128,11 @@ class RasterSettings:
             (or, below the hole threshold, leaving a hole), so silhouettes keep their
             size however large the splats grow.
         blend_coverage: False (default): a pixel shows its front surface alone (normalised by
-            its weight). True: a pixel the front covers only partly (its *coverage*, the front's
-            kept weight times each splat's squared half-width, below 1, as at a silhouette, where
-            the bilinear weight of the last point is the share of the pixel its footprint covers)
+            its weight). True: a pixel the front covers only partly (its *coverage*, the sum of the
+            front's kept taps' tent values (before the splat's normalisation; times the point's
+            opacity, ``point_alpha``), below 1, as at a silhouette, where the tent of the last point
+            is the share of the pixel its footprint covers; tents of half-width h spaced h apart sum
+            to exactly 1, so a magnified surface covers its pixels at any phase)
             shows the front over the next surface behind it (the nearest depth of the
             front-setting contributions behind the front band, and its own band):
             ``coverage * front + (1 - coverage) * behind``. Silhouettes are anti-aliased instead
@@ -218,7 +220,7 @@ class _Splats(NamedTuple):
     # splats at supersample 1 only
     back_weight: Optional[torch.Tensor] = None  # (E,) blend_coverage: splat weight of the entries kept
     # on the surface behind the front, 0 elsewhere
-    cover: Optional[torch.Tensor] = None  # (E,) blend_coverage: front entries' weight * half-width^2, 0 elsewhere
+    cover: Optional[torch.Tensor] = None  # (E,) blend_coverage: front entries' tent value (times the opacity), 0 elsewhere
 
 
 def _check_inputs(points_cam: torch.Tensor, features: torch.Tensor, K: torch.Tensor, settings,
@@ -311,6 +313,9 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
     Ks = K.detach().to(device=dev, dtype=dtype).clone()
     Ks[:2] *= s  # (3, 3) intrinsics of the sub-pixel raster
     soft = settings.soft_edges
+    # at 2x the sub-pixel z-buffer anti-aliases silhouettes; without point sizes a magnified surface's
+    # bilinear splats do not tile the view, so their weight does not measure the coverage
+    blend = settings.blend_coverage and s == 1 and point_size is not None
     zbuf = torch.full((Hs * Ws,), math.inf, dtype=dtype, device=dev)  # least depth of every tap
     zfront = torch.full((Hs * Ws,), math.inf, dtype=dtype, device=dev)  # least depth of the front-setting taps
     strong_weight = settings.hole_weight_threshold
@@ -355,12 +360,17 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
             else:
                 wx = (1.0 - (xs - ag).abs() / hg).clamp_min(0.0)  # (2r, mg) tent of half-width hg
                 wy = (1.0 - (ys - bg_).abs() / hg).clamp_min(0.0)
+            T, mg = 4 * r * r, ag.shape[0]
+            # blend_coverage: a tap's share of its pixel is the tent's own value there: tents of half-width
+            # h spaced h apart sum to exactly 1 (a partition of unity), so a magnified surface covers its
+            # pixels wholly at any phase of its points against the pixel grid (the normalised weights times
+            # h^2 summed to 0.8-1.1 with the phase, and the surface behind showed through as a grid)
+            tent = (wy[:, None] * wx[None]).reshape(T, mg) if blend else None
             if r > 1:  # every point deposits a total weight of 1 (the bilinear weights already do)
                 # summed row by row (element-wise, in a fixed order): a reduction kernel's order can
                 # depend on the number of points, and the result must not depend on the chunking
                 wx = wx / _row_sum(wx)
                 wy = wy / _row_sum(wy)
-            T, mg = 4 * r * r, ag.shape[0]
             w = (wy[:, None] * wx[None]).reshape(T, mg)  # (T, mg), row = dy * 2r + dx
             # per axis (2r, mg), then combined: the same as testing the (T, mg) taps
             xl, yl = xs.long(), ys.long()
@@ -383,7 +393,7 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
             zfront.scatter_reduce_(0, q.reshape(-1), torch.where(sets, zg, math.inf).reshape(-1), reduce="amin")
             rows = idx if sel is None else idx.index_select(0, sel)
             c00 = o[0] if (r == 1 and s == 1) else None  # (mg,) corner 00 = y0 * W + x0, unmasked
-            parts[r] = (rows, w, ok, q, o, zg, c00, sets, hg)
+            parts[r] = (rows, w, ok, q, o, zg, c00, sets, tent)
         chunks.append(parts)
 
     # A (sub-)pixel's own front: its front-setting taps' least depth, where it has one, else its
@@ -400,15 +410,12 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
         near = own
 
     tol = 1.0 + settings.depth_tolerance
-    # at 2x the sub-pixel z-buffer anti-aliases silhouettes; without point sizes a magnified surface's
-    # bilinear splats do not tile the view, so their weight does not measure the coverage
-    blend = settings.blend_coverage and s == 1 and point_size is not None
     zback = torch.full((Hs * Ws,), math.inf, dtype=dtype, device=dev) if blend else None  # next surface's front
     tested: Dict[int, list] = {}  # reach -> per chunk (rows, pixel, weight, kept, c00, back, cover), in point order
     for parts in chunks:
         if len(chunks) > 1:
             _check_stop(should_stop)
-        for r, (rows, w, ok, q, o, zg, c00, sets, hg) in parts.items():
+        for r, (rows, w, ok, q, o, zg, c00, sets, _) in parts.items():
             front = near.index_select(0, q.reshape(-1)).view_as(q)  # (T, mg)
             keep = (zg <= front * tol) & ok  # (T, mg)
             # a nearer surface's faint taps (or, with soft edges, its fringe) give way to the front
@@ -422,7 +429,7 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
         for k, parts in enumerate(chunks):
             if len(chunks) > 1:
                 _check_stop(should_stop)
-            for r, (rows, w, ok, q, o, zg, c00, sets, hg) in parts.items():
+            for r, (rows, w, ok, q, o, zg, c00, sets, tent) in parts.items():
                 entry = tested[r][sum(1 for c in chunks[:k] if r in c)]
                 front = near.index_select(0, q.reshape(-1)).view_as(q)
                 z2 = zback.index_select(0, q.reshape(-1)).view_as(q)
@@ -430,7 +437,7 @@ def _splat(points_cam: torch.Tensor, K: torch.Tensor, settings: RasterSettings, 
                 entry[1] = torch.where(back, o, entry[1])
                 entry[3] = entry[3] | back
                 entry[5] = torch.where(back, w, 0.0)
-                cover = w * (hg * hg)  # a tap's share of its pixel (the splats of one surface tile the view)
+                cover = tent  # a tap's share of its pixel (the splats of one surface tile the view)
                 if point_alpha is not None:  # ... times its point's opacity
                     cover = cover * point_alpha.index_select(0, rows).to(device=dev, dtype=dtype)
                 entry[6] = torch.where(entry[3] & ~back, cover, 0.0)  # coverage of the kept front taps
@@ -621,8 +628,8 @@ def _blend_weights(sp: _Splats, w_all: torch.Tensor, inv: torch.Tensor, hole: to
                    threshold: float, step: Optional[int], should_stop: Optional[Callable[[], bool]]) -> torch.Tensor:
     """(E,) entry weights of ``blend_coverage``: ``coverage * front + (1 - coverage) * behind`` per pixel.
 
-    A pixel's coverage is the sum of its front entries' ``cover`` (weight times the splat's squared
-    half-width, so a surface of points one splat half-width apart covers 1), at most 1; where the
+    A pixel's coverage is the sum of its front entries' ``cover`` (the tent's value at the tap, so a
+    surface of points one splat half-width apart covers 1), at most 1; where the
     surface behind has a kept weight of at least ``threshold``, the front's normalised weights are
     scaled by the coverage and the behind's by the rest; elsewhere the front alone is normalised.
     """

@@ -71,14 +71,15 @@ def rasterize_points_reference(
         x0, y0 = math.floor(a), math.floor(b)
         cols = [(j, max(0.0, 1.0 - abs(j - a) / half)) for j in range(x0 + 1 - r, x0 + r + 1)]
         rows = [(i, max(0.0, 1.0 - abs(i - b) / half)) for i in range(y0 + 1 - r, y0 + r + 1)]
+        sx, sy = 1.0, 1.0
         if r > 1:  # normalised: every point deposits a total weight of 1
             sx, sy = sum(w for _, w in cols), sum(w for _, w in rows)
-            cols, rows = [(j, w / sx) for j, w in cols], [(i, w / sy) for i, w in rows]
         for i, wy in rows:
             for j, wx in cols:
-                w = wx * wy
+                w = wx * wy / (sx * sy)
+                tent = wx * wy * opacity[n]  # blend_coverage: the tap's share of its pixel
                 if w > 0 and 0 <= i < Hs and 0 <= j < Ws:
-                    received[(i, j)].append((n, w, z, half == 1.0 or w >= CORE_WEIGHT / half**2, half))
+                    received[(i, j)].append((n, w, z, half == 1.0 or w >= CORE_WEIGHT / half**2, tent))
 
     # 2. Z-buffer per sub-pixel, keep the front surface, pool into output pixels.
     A = torch.zeros(H * W, N, dtype=torch.float64)
@@ -108,13 +109,13 @@ def rasterize_points_reference(
         depth[p] = min(float(depth[p]), own_front[(i, j)])
         # blend_coverage: the next surface's front, set by the front-setting taps behind the front band
         z2 = min([z for _, w, z, core, _ in contributions if z > zmin * tol and sets_front(w, core)] or [math.inf])
-        for n, w, z, _, half in contributions:
+        for n, w, z, _, tent in contributions:
             if z * tol < zmin:
                 continue  # a nearer surface's faint taps (soft edges: its fringe) give way to the front
             if z <= zmin * tol:
                 A[p, n] += w
                 wsum[p] += w
-                cover[p] += w * half * half * opacity[n]
+                cover[p] += tent
             elif blend and z2 <= z * tol and z <= z2 * tol:
                 B[p, n] += w
                 wback[p] += w

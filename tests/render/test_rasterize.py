@@ -731,6 +731,25 @@ def test_blend_coverage_keeps_a_magnified_surface_opaque(raster):
     assert torch.allclose(frag.image[0][inner], torch.ones((), dtype=F64))
 
 
+@pytest.mark.parametrize("spacing,phase", [(1.37, (0.3, 0.6)), (1.5, (0.0, 0.25)), (2.6, (0.45, 0.1))])
+def test_blend_coverage_keeps_a_surface_opaque_at_any_magnification_and_phase(raster, spacing, phase):
+    """Points ``spacing`` pixels apart with splats of that half-width, at any phase against the pixel grid,
+    cover every pixel inside them wholly: the surface behind does not show through as a grid (the tents
+    sum to exactly 1; the normalised weights times the half-width squared did not)."""
+    K = simple_K(16, 16)
+    n = int(14 / spacing)
+    front = [(1.0 + phase[0] + spacing * i, 1.0 + phase[1] + spacing * j, 1.0) for i in range(n) for j in range(n)]
+    back = [(0.5 + i, 0.5 + j, 3.0) for i in range(16) for j in range(16)]
+    pts, _ = scene(K, front + back, C=1)
+    feats = torch.cat([torch.ones(len(front), 1), torch.zeros(len(back), 1)]).to(F64)
+    size = footprint(pts, K, torch.tensor([spacing] * len(front) + [1.0] * len(back), dtype=F64))
+    frag = raster(pts, feats, K, RasterSettings(16, 16, blend_coverage=True), point_size=size)
+    lo, hi = int(math.ceil(1.0 + phase[0] + 0.5)), int(1.0 + spacing * (n - 1) - 0.5)
+    inner = (slice(lo, hi), slice(lo, hi))
+    assert hi - lo >= 6
+    assert torch.allclose(frag.image[0][inner], torch.ones((), dtype=F64), atol=1e-9)
+
+
 @pytest.mark.parametrize("supersample", [1, 2])
 @pytest.mark.parametrize("soft_edges", [False, True])
 @pytest.mark.parametrize("seed", range(2))
