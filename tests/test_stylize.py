@@ -78,8 +78,8 @@ def test_render_stops_between_stages_when_asked(stylized):
             return len(calls) > n
         return check
 
-    # no border margin: the frame decoded is the 32 x 48 asked for, where the strips are exact to the bit (at
-    # some sizes, 48 x 64 among them, a convolution run in strips differs in the last bit, ~3e-8)
+    # no border margin: the frame decoded is the 32 x 48 asked for (a convolution run in strips can differ from
+    # the whole in the last bit, ~3e-8, by oneDNN's choice of kernel for the size and width)
     before, s.settings = s.settings, replace(s.settings, border_margin=0)
     try:
         with pytest.raises(RenderInterrupted):
@@ -93,7 +93,7 @@ def test_render_stops_between_stages_when_asked(stylized):
         calls.clear()
         full = s.render(cam, 32, 48, should_stop=lambda: calls.append(1) and False)
         assert len(calls) > 3  # checked at every stage
-        assert (full == s.render(cam, 32, 48)).all()  # checking changes nothing
+        np.testing.assert_allclose(full, s.render(cam, 32, 48), rtol=0, atol=1e-6)  # checking changes nothing
         assert not s.model.decoder.out_rgb._forward_pre_hooks
     finally:
         s.settings = before

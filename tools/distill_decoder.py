@@ -1,14 +1,14 @@
 """Distil the shipped model's U-Net decoder into a narrower one (an experiment toward faster frames).
 
 The decoder is most of a stylized frame's time on a CPU (its multiply-adds grow with the square of its
-width). This trains a decoder of ``--width`` (the shipped one: 96) to reproduce the shipped decoder's
+width). This trains a decoder of ``--width`` (narrower than the shipped one's) to reproduce the shipped decoder's
 frames from the same rasterized features: the teacher model encodes, stylizes (a random style of the
 bank, or none) and rasterizes the training set's views exactly as training and inference do, its
 decoder gives the target frames, and the student learns them (L1 on the colours and on their
 horizontal / vertical differences, which carry the texture). Everything before the decoder stays the
 teacher's, so a student drops into the checkpoint in place of the decoder.
 
-    .venv/bin/python tools/distill_decoder.py --out runs/distill64 [--width 64] [--samples 600]
+    .venv/bin/python tools/distill_decoder.py --out runs/distill48 [--width 48] [--samples 600]
         [--steps 2000] [--batch 16]
 
 Phase 1 caches the (features, mask, teacher frame) triples of ``--samples`` training samples (and of
@@ -104,7 +104,7 @@ def main() -> None:
     ap.add_argument("--model", default=str(MODEL))
     ap.add_argument("--data", default=str(ROOT / "runs" / "data"))
     ap.add_argument("--styles", default=str(ROOT / "runs" / "styles"))
-    ap.add_argument("--width", type=int, default=64)
+    ap.add_argument("--width", type=int, default=48)
     ap.add_argument("--samples", type=int, default=600)
     ap.add_argument("--eval-samples", type=int, default=60)
     ap.add_argument("--steps", type=int, default=2000)

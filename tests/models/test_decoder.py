@@ -195,7 +195,7 @@ def test_colour_transform_config_checks():
         DecoderConfig(in_channels=8, transform_channels=2)
     with pytest.raises(InputError, match="transform_channels"):
         DecoderConfig(in_channels=3, width=16, transform_channels=3)
-    assert DecoderConfig.lite(in_channels=35, transform_channels=3).transform_gain == pytest.approx(1 / 64)
+    assert DecoderConfig.lite(in_channels=35, transform_channels=3).transform_gain == pytest.approx(1 / 48)
     with pytest.raises(InputError, match="transform_gain"):
         DecoderConfig(in_channels=8, transform_channels=3, transform_gain=0.0)
 
