@@ -69,11 +69,12 @@ class StylizeSettings:
         strength: style strength in [0, 1]; 0 renders the photo through the model. Default
             :data:`DEFAULT_STRENGTH` (1: the full style).
         supersample: 1 (default) or 2 for full-quality frames (previews never supersample).
-        preview_points_per_pixel: points kept per output pixel in previews. Default 10 (5 until version 7 of
-            the model, 3 until version 6). The sharper the model, the more its frames depend on which points
-            land: 256-px previews of the 1 MP sample with version 7 are 28.8 / 30.0 / 30.3 / 30.8 dB from
-            every point at 5 / 8 / 9 / 10 points per pixel (the preview target is 30 dB), at +14 % (8) and
-            +21 % (10) of 5's CPU time per preview.
+        preview_points_per_pixel: points kept per output pixel in previews. Default 5 (10 in version 7 and 8
+            of the model, 5 before, 3 until version 6). Most of a preview's error against the full frame was
+            the rim the decoder leaves at a frame's edge, not the point subset: with the preview's border margin
+            as wide as the full frame's (8), 256x256 previews of the 1 MP sample with version 9 are 31.0 / 32.1
+            / 33.9 dB from the full frame at 4 / 5 / 6 points per pixel (10 with a margin of 4: 32.0 dB, 1.2-1.3x
+            the time of 5; the target is 30 dB).
         seed: seed of the point order and the encoder's subset.
         final_points_per_pixel: None (default): full frames rasterize every point. A number: full frames
             keep about this many points per output (super)pixel, as previews do (a prefix of the point
@@ -101,14 +102,16 @@ class StylizeSettings:
             is decoded as its inside is, at ~4 % more time at 512x342. Rounded up to a multiple of the
             decoder's stride (at split-resolution decoding, times the decode scale), so the frame keeps the
             decoder's grid phase.
-        preview_border_margin: the same for previews (default 4: the rim is as wide at any size, so it covers
-            more of a small preview; 4 pixels take the edge's error from ~20 to ~7 levels at +10-14 % time,
-            and the preview from 24.7 to 30.3 dB of the rim-free full frame).
+        preview_border_margin: the same for previews (default 8, as full frames: the rim is as wide at any
+            size, so it covers more of a small preview; with the full frame's margin a preview decodes its
+            edge as the full frame does: 256x256 previews of the 1 MP sample with version 8 at 10 points per
+            pixel were 22.5 / 30.8 / 36.4 dB from the full frame with margins 0 / 4 / 8; 4 was the default
+            until version 9).
     """
 
     strength: float = DEFAULT_STRENGTH
     supersample: int = 1
-    preview_points_per_pixel: float = 10.0
+    preview_points_per_pixel: float = 5.0
     seed: int = 0
     final_points_per_pixel: Optional[float] = None
     decode_scale: int = 1
@@ -117,7 +120,7 @@ class StylizeSettings:
     bfloat16: Optional[bool] = None
     decoder_runtime: str = "auto"
     border_margin: int = 8
-    preview_border_margin: int = 4
+    preview_border_margin: int = 8
 
     def __post_init__(self) -> None:
         for name, lo, hi, unit in (("border_margin", 0, 64, " (pixels)"), ("preview_border_margin", 0, 64, " (pixels)"),
