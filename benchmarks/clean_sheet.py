@@ -15,6 +15,18 @@ supports (``Photo3D.camera_range``, right + down + forward). Without
 ``--poses`` it computes those cameras (this needs the new library); with it,
 it reuses another run's. Frames are stored with their hole masks (pixels no
 point covered, shown magenta on the sheet's lower half of each tile pair).
+
+Details a 256-px tile cannot show (a silhouette's sub-pixel position, a faint grid on a magnified
+surface) need the photo's own size and a magnified crop::
+
+    .venv/bin/python benchmarks/clean_sheet.py render --size 640 --photos coffee,astronaut --out /tmp/after.npz
+    .venv/bin/python benchmarks/clean_sheet.py render --size 640 --photos coffee,astronaut --library /work/main \
+        --poses /tmp/after.npz --out /tmp/before.npz
+    .venv/bin/python benchmarks/clean_sheet.py zoom /tmp/before.npz /tmp/after.npz \
+        --crop coffee:0:40,300,100 --crop astronaut:1:60,330,100 --out docs/clean_zoom.png
+
+``zoom`` lays out, per ``--crop photo:column:y,x,size``, the before and after frames' square crop
+(column 0-2 as in the sheet, y and x its top-left corner in the frame), magnified 4x (nearest).
 """
 
 from __future__ import annotations
@@ -45,8 +57,9 @@ def _render(args: argparse.Namespace) -> None:
 
     given = np.load(args.poses) if args.poses else None
     out = {}
-    for name, rgb in test_photos(TILE):
-        if name not in SHEET_PHOTOS:
+    wanted = args.photos.split(",") if args.photos else SHEET_PHOTOS
+    for name, rgb in test_photos(args.size):
+        if name not in wanted:
             continue
         p3d = Photo3D.build(rgb, estimate_depth(PriorDepth(), rgb), Photo3DSettings())
         if given is not None:
@@ -113,6 +126,29 @@ def _compose(args: argparse.Namespace) -> None:
     print(f"wrote {args.out}: {sheet.shape[1]}x{sheet.shape[0]}")
 
 
+def _zoom(args: argparse.Namespace) -> None:
+    import cv2
+
+    before, after = np.load(args.before), np.load(args.after)
+    rows = []
+    for spec in args.crop:
+        name, column, box = spec.split(":")
+        y, x, size = (int(v) for v in box.split(","))
+        pair = []
+        for label, run in (("before", before), ("after", after)):
+            crop = run[f"{name}/frames"][int(column)][y:y + size, x:x + size]
+            tile = (crop.repeat(4, 0).repeat(4, 1).clip(0, 1) * 255).round().astype(np.uint8)
+            tile = np.ascontiguousarray(np.pad(tile, ((20, 4), (4, 4), (0, 0)), constant_values=255))
+            cv2.putText(tile, f"{label}: {name}, {COLUMNS[int(column)]}", (6, 15), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
+                        (0, 0, 0), 1, cv2.LINE_AA)
+            pair.append(tile)
+        rows.append(np.concatenate(pair, axis=1))
+    wmax = max(r.shape[1] for r in rows)
+    sheet = np.concatenate([np.pad(r, ((0, 0), (0, wmax - r.shape[1]), (0, 0)), constant_values=255) for r in rows])
+    cv2.imwrite(args.out, np.ascontiguousarray(sheet[..., ::-1]))
+    print(f"wrote {args.out}: {sheet.shape[1]}x{sheet.shape[0]}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="cmd", required=True)
@@ -120,12 +156,19 @@ def main() -> None:
     r.add_argument("--library", help="repository root whose stylize3d_core to use (default: this one)")
     r.add_argument("--poses", help="an earlier run's .npz to take the cameras from")
     r.add_argument("--out", required=True)
+    r.add_argument("--size", type=int, default=TILE, help="long side the photos are loaded at (default 256)")
+    r.add_argument("--photos", default=None, help="comma-separated test photos (default the sheet's four)")
     c = sub.add_parser("compose", help="lay out a before and an after run side by side")
     c.add_argument("before")
     c.add_argument("after")
     c.add_argument("--out", default=str(ROOT / "docs" / "clean_contact_sheet.png"))
+    z = sub.add_parser("zoom", help="magnified crops of a before and an after run side by side")
+    z.add_argument("before")
+    z.add_argument("after")
+    z.add_argument("--crop", action="append", required=True, metavar="PHOTO:COLUMN:Y,X,SIZE")
+    z.add_argument("--out", default=str(ROOT / "docs" / "clean_zoom.png"))
     args = parser.parse_args()
-    _render(args) if args.cmd == "render" else _compose(args)
+    {"render": _render, "compose": _compose, "zoom": _zoom}[args.cmd](args)
 
 
 if __name__ == "__main__":
