@@ -89,8 +89,13 @@ def test_relief_exaggerates_the_depth_and_keeps_the_photo_view(photo, tmp_path):
         spread = np.log(np.median(base[:, 2]) / NEAR_DEPTH)
         assert spread > 0.1
         np.testing.assert_allclose(np.log(np.median(cloud[:, 2]) / NEAR_DEPTH), float(k) * spread, rtol=0.1)
-        # Points move along their rays: the photo's own camera sees the same picture.
-        np.testing.assert_allclose(cloud[:, :2] / cloud[:, 2:], base[:, :2] / base[:, 2:], atol=1e-4)
+        # Points move along their rays: the photo's own camera sees the same picture (but for the foreground's
+        # anti-aliased silhouette points, which sit up to half a pixel inwards of their pixel's centre,
+        # LDI.offset; the relief changes which edges are silhouettes)
+        rays, base_rays = cloud[:, :2] / cloud[:, 2:], base[:, :2] / base[:, 2:]
+        pixel = np.median(np.abs(np.diff(base_rays[:, 0]))[np.abs(np.diff(base_rays[:, 0])) > 1e-6])  # 1 / f
+        off = np.abs(rays - base_rays).max(axis=1)
+        assert (off > 1e-4).mean() < 0.01 and off.max() <= 1.0 * pixel + 1e-4
     assert main(common + ["--relief", "5", "-o", str(tmp_path / "bad.mp4")]) == 2
     assert not (tmp_path / "bad.mp4").exists()
 
