@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from app.viewer.script import run_viewer_process  # noqa: E402
-from app.viewer.xserver import start_xvfb, xtest_libs  # noqa: E402
+from app.viewer.xserver import start_xvfb, xtest_click, xtest_libs  # noqa: E402
 
 SAMPLES = ROOT / "assets" / "samples"
 FILE_MENU = (22, 12)
@@ -39,7 +39,7 @@ def main() -> int:
     if libs is None or server is None:
         print("needs Xvfb and libXtst", file=sys.stderr)
         return 1
-    lx, lt = libs
+    lx = libs[0]
     xproc, display = server
     with tempfile.TemporaryDirectory() as tmp:
         os.environ["STYLIZE3D_CONFIG_DIR"] = str(Path(tmp) / "settings")  # no recent files of the user's
@@ -69,22 +69,8 @@ def main() -> int:
                 print("the viewer did not open the photos", file=sys.stderr)
                 return 1
             dpy = lx.XOpenDisplay(display.encode())
-
-            def move(x: int, y: int, steps: int = 8) -> None:  # in steps, as a hand moves: Open3D sees the hover
-                for i in range(1, steps + 1):
-                    lt.XTestFakeMotionEvent(dpy, -1, box[0] + x, box[1] + y + steps - i, 0)
-                    lx.XFlush(dpy)
-                    time.sleep(0.05)
-
-            move(*FILE_MENU)
-            time.sleep(0.3)
-            lt.XTestFakeButtonEvent(dpy, 1, 1, 0)
-            lx.XFlush(dpy)
-            time.sleep(0.15)
-            lt.XTestFakeButtonEvent(dpy, 1, 0, 0)
-            lx.XFlush(dpy)
-            time.sleep(0.6)
-            move(*RECENT_PHOTOS)
+            xtest_click(libs, dpy, box[0] + FILE_MENU[0], box[1] + FILE_MENU[1])  # opens the File menu
+            xtest_click(libs, dpy, box[0] + RECENT_PHOTOS[0], box[1] + RECENT_PHOTOS[1], press=False)  # hover
             lx.XCloseDisplay(dpy)
             proc.join(120)
         finally:

@@ -3,7 +3,8 @@
 Headless like the test hooks (:mod:`app.viewer.script`): nothing here imports
 Open3D. :func:`start_xvfb` starts an Xvfb that picks a free display number
 itself (``-displayfd``); :func:`xtest_libs` loads libX11 and libXtst through
-ctypes, whose ``XTestFake*Event`` calls send real mouse and key events;
+ctypes, whose ``XTestFake*Event`` calls send real mouse and key events (:func:`xtest_click`: a click
+that Open3D's GUI takes on a loaded machine);
 :class:`XDisplay` holds a connection to a display and asks it for an extension
 (GLX: can it run OpenGL).
 """
@@ -80,6 +81,30 @@ def xtest_libs() -> Optional[Tuple[ctypes.CDLL, ctypes.CDLL]]:
     lt.XTestFakeButtonEvent.argtypes = [ctypes.c_void_p, ctypes.c_uint, ctypes.c_int, ctypes.c_ulong]
     lt.XTestFakeKeyEvent.argtypes = [ctypes.c_void_p, ctypes.c_uint, ctypes.c_int, ctypes.c_ulong]
     return lx, lt
+
+
+def xtest_click(libs: Tuple[ctypes.CDLL, ctypes.CDLL], dpy: int, x: int, y: int, *, press: bool = True,
+                steps: int = 7, step_s: float = 0.06, settle_s: float = 0.6, hold_s: float = 0.6,
+                after_s: float = 1.0) -> None:
+    """Move the pointer onto (x, y) of display connection ``dpy`` in ``steps`` moves from below, as a hand
+    does, wait ``settle_s``, and (``press``) click button 1, holding it ``hold_s``, then wait ``after_s``.
+
+    ImGui (Open3D's GUI) takes a click on an item only when one of its frames saw the pointer over the item
+    and a later one the press; on a busy machine (frames of 0.2 s and more) a single move, the press and the
+    release fell into one frame and a menu did not open."""
+    lx, lt = libs
+    for k in range(steps - 1, -1, -1):
+        lt.XTestFakeMotionEvent(dpy, -1, int(x), int(y) + k, 0)
+        lx.XFlush(dpy)
+        time.sleep(step_s)
+    time.sleep(settle_s)
+    if press:
+        lt.XTestFakeButtonEvent(dpy, 1, 1, 0)
+        lx.XFlush(dpy)
+        time.sleep(hold_s)
+        lt.XTestFakeButtonEvent(dpy, 1, 0, 0)
+        lx.XFlush(dpy)
+        time.sleep(after_s)
 
 
 class XDisplay:

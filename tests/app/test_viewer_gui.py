@@ -22,7 +22,7 @@ import pytest
 from PIL import Image
 
 from app.viewer.script import run_viewer_process
-from app.viewer.xserver import start_xvfb, xtest_libs
+from app.viewer.xserver import start_xvfb, xtest_click, xtest_libs
 
 pytestmark = [pytest.mark.gui, pytest.mark.slow]  # each test starts Open3D in a subprocess: 8-30 s
 
@@ -607,29 +607,15 @@ def test_typed_paths_in_open_dialogs_and_recent_files_kept_between_runs(display,
         rep = wait_for_step(report_path, "grab_window")
         if libs is None:  # no real events: choose the entry as its menu item does
             return
-        lx, lt = libs
+        lx = libs[0]
         shot = step(rep, "grab_window")["result"]
         x0, y0 = shot["box"][:2]
         em = shot["em"]
         dpy = lx.XOpenDisplay(display.encode())
 
         def click(x: float, y: float, press: bool = True) -> None:
-            # several moves onto the target, as a hand makes, and a press held for more than a GUI frame:
-            # ImGui takes a click on an item only when one frame saw the pointer over it and a later one the
-            # press; on a busy machine (a frame of 0.2 s and more) a single move, the press and the release
-            # fell into one frame and the menu did not open
-            for k in range(6, -1, -1):
-                lt.XTestFakeMotionEvent(dpy, -1, int(x0 + x), int(y0 + y) + k, 0)
-                lx.XFlush(dpy)
-                time.sleep(0.06)
-            time.sleep(0.6)
-            if press:
-                lt.XTestFakeButtonEvent(dpy, 1, 1, 0)
-                lx.XFlush(dpy)
-                time.sleep(0.6)
-                lt.XTestFakeButtonEvent(dpy, 1, 0, 0)
-                lx.XFlush(dpy)
-                time.sleep(1.0)
+            # several moves onto the target and a press held for more than a GUI frame (see xtest_click)
+            xtest_click(libs, dpy, x0 + x, y0 + y, press=press)
 
         try:  # ImGui's menus: items 1.5 em apart below a 1.5 em bar (File's 5th item: Recent photos)
             click(1.4 * em, 0.75 * em)
