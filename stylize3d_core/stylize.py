@@ -48,6 +48,7 @@ from .models.colour_transfer import ColourTransfer, LabStats, lab_stats, mix_sta
 from .models import decoder_onnx
 from .models.decoder import native_bfloat16
 from .models.palette import Palette, apply_palette, fit_palette, palette_target
+from .models.style_prior import StylePrior, StylePriorSettings, interpolate_vectors
 from .models.style_features import StyleEncoder, StyleFeatures
 from .models.scene_geometry import SceneGeometry, prepare_geometry
 from .models.stylize3d import Stylize3DModel
@@ -55,6 +56,7 @@ from .points.sampling import start_fps_process
 from .render.plain import StratifiedOrder, preview_point_count
 from .render.rasterize_fast import warm_up_async
 from .render.rasterizer import columns
+from .scene.layer_images import hidden_layer_image, layer_colours
 from .scene.photo3d import Photo3D
 
 
@@ -107,6 +109,9 @@ class StylizeSettings:
             edge as the full frame does: 256x256 previews of the 1 MP sample with version 8 at 10 points per
             pixel were 22.5 / 30.8 / 36.4 dB from the full frame with margins 0 / 4 / 8; 4 was the default
             until version 9).
+        prior_size: models with the 2D style prior (``ModelConfig.style_prior``): long side in pixels at which
+            the prior paints the LDI's layer images (default 512, see :mod:`~stylize3d_core.models.style_prior`).
+            Larger keeps more of the photo's detail and makes the painting's marks finer.
     """
 
     strength: float = DEFAULT_STRENGTH
@@ -121,8 +126,10 @@ class StylizeSettings:
     decoder_runtime: str = "auto"
     border_margin: int = 8
     preview_border_margin: int = 8
+    prior_size: int = 512
 
     def __post_init__(self) -> None:
+        StylePriorSettings(size=self.prior_size)  # validates it
         for name, lo, hi, unit in (("border_margin", 0, 64, " (pixels)"), ("preview_border_margin", 0, 64, " (pixels)"),
                                    ("decode_scale", 1, 8, ""), ("preview_decode_scale", 1, 8, "")):
             value = getattr(self, name)
@@ -224,6 +231,17 @@ def style_feature_cache(encoder: StyleEncoder) -> StyleFeatureCache:
     return cache
 
 
+_PRIORS: Dict[int, StylePrior] = {}
+
+
+def style_prior(size: int) -> StylePrior:
+    """The process's one :class:`StylePrior` painting at ``size`` (its ONNX sessions load once)."""
+    prior = _PRIORS.get(size)
+    if prior is None:
+        prior = _PRIORS[size] = StylePrior(StylePriorSettings(size=size))
+    return prior
+
+
 def _with_margin(camera: Cameras, height: int, margin: int, align: int) -> Tuple[Cameras, int]:
     """``camera`` widened to render ``m`` more pixels on each side at the same focal length, and ``m``:
     ``margin`` rounded up to a multiple of ``align`` (0 stays 0; less where the wider field of view would
@@ -304,6 +322,10 @@ class Stylized3DPhoto:
         self._style_stats2: Optional[LabStats] = None
         self._transfer: Optional[ColourTransfer] = early.get("transfer")  # the points' colours, ready to recolour
         self._mix = 0.0
+        self._vector: Optional[np.ndarray] = None  # (100,) the style prior's vector of the style (style_prior)
+        self._vector2: Optional[np.ndarray] = None  # ... of the second style
+        self._own_vector: Optional[np.ndarray] = None  # ... of the photo itself (strength < 1)
+        self._painted: "OrderedDict[bytes, torch.Tensor]" = OrderedDict()  # vector -> (N, 3) prior colours, ordered
         self._dense: Optional[torch.Tensor] = None  # (N, Cr) in self._order
         self._palette_target: Optional[LabStats] = None  # what the palette map aims at (set with the dense features)
         self._palette: Optional[Palette] = None  # the map the last render used (its size's, from self._palettes)
@@ -338,12 +360,15 @@ class Stylized3DPhoto:
         if style_rgb is None:
             self._stylized = None
             self._style_stats = None
+            self._vector = None
         else:
             t0 = time.perf_counter()
             with torch.inference_mode():
                 maps = style_feature_cache(self._encoder()).features(style_tensor(style_rgb)).maps
                 self._stylized = self.model.stylizer.stylize(self._content, maps).float()  # (M, C), float32 after autocast
             self._style_stats = lab_stats(style_rgb)
+            if self.model.config.style_prior:
+                self._vector = self._prior().style_vector(style_rgb)
             self.timings["style"] = time.perf_counter() - t0
         self._dense = None
 
@@ -352,12 +377,15 @@ class Stylized3DPhoto:
         if style_rgb is None:
             self._stylized2 = None
             self._style_stats2 = None
+            self._vector2 = None
         else:
             with torch.inference_mode():
                 second = style_tensor(style_rgb, "second style image")
                 maps = style_feature_cache(self._encoder()).features(second).maps
                 self._stylized2 = self.model.stylizer.stylize(self._content, maps).float()  # (M, C), as set_style
             self._style_stats2 = lab_stats(style_rgb)
+            if self.model.config.style_prior:
+                self._vector2 = self._prior().style_vector(style_rgb, "second style image")
         self._dense = None
 
     def set_mix(self, mix: float) -> None:
@@ -389,8 +417,11 @@ class Stylized3DPhoto:
                 sparse = blend(self._content, stylized, self._strength)
                 if self.model.config.detail_transfer and stats is not None:
                     colours = self._colour_transfer()(stats, self._strength)
+                if self.model.config.style_prior and self._vector is not None:
+                    colours = self._prior_colours()
             target = None
-            if stylized is not None and self._strength > 0.0 and stats is not None and self.settings.match_palette:
+            if (stylized is not None and self._strength > 0.0 and stats is not None and self.settings.match_palette
+                    and not self.model.config.style_prior):  # the prior paints the style's palette itself
                 target = palette_target(self._colour_transfer().stats, stats, self._strength)
             dense = self.model.dense_features(sparse, self._in_order, colours)  # (N, Cr), in self._order
             if not torch.isfinite(dense.sum()) and not torch.isfinite(dense).all():
@@ -401,6 +432,39 @@ class Stylized3DPhoto:
         self._palette_target, self._palette = target, None
         self._palettes = {}
         self.timings["upsample"] = time.perf_counter() - t0
+
+    def _prior(self) -> StylePrior:
+        return style_prior(self.settings.prior_size)
+
+    PAINTINGS_KEPT = 4
+    """Prior paintings kept per photo (by style vector: going back to a recent strength or mix is free)."""
+
+    def _prior_colours(self) -> torch.Tensor:
+        """(N, 3) the style prior's colours of the points (in point order) for the current style, mix and
+        strength: the style vector (the mix of the two styles' vectors, interpolated from the photo's own
+        by the strength) paints the LDI's two layer images; each point reads its own layer's pixel."""
+        vector = self._vector
+        if self._vector2 is not None and self._mix > 0.0:
+            vector = interpolate_vectors(vector, self._vector2, self._mix)
+        if self._strength < 1.0:
+            if self._own_vector is None:
+                self._own_vector = self._prior().style_vector(self.photo.rgb, "photo")
+            vector = interpolate_vectors(self._own_vector, vector, self._strength)
+        key = np.asarray(vector, np.float32).tobytes()
+        hit = self._painted.get(key)
+        if hit is not None:
+            self._painted.move_to_end(key)
+            return hit
+        t0 = time.perf_counter()
+        ldi = self.photo.ldi
+        layer0, layer1 = self._prior().paint([ldi.rgb, hidden_layer_image(ldi)], vector)
+        colours = layer_colours(self.photo.points, ldi, layer0, layer1)  # (N, 3) in the photo's point order
+        ordered = torch.from_numpy(colours).index_select(0, self._order)
+        self._painted[key] = ordered
+        while len(self._painted) > self.PAINTINGS_KEPT:
+            self._painted.popitem(last=False)
+        self.timings["prior"] = time.perf_counter() - t0
+        return ordered
 
     def _colour_transfer(self) -> ColourTransfer:
         if self._transfer is None:

@@ -70,12 +70,11 @@ import torch
 
 from ..checks import check_range, check_shape
 from ..errors import InputError
-from ..geometry.camera import Cameras, focal_from_fov
+from ..geometry.camera import Cameras
 from ..io.images import load_image, resize_image, save_image
 from ..render.plain import PlainRenderer, PlainRenderSettings
-from ..scene.ldi import INPAINTED, LDI
+from ..scene.layer_images import hidden_layer_image, layer_colours
 from ..scene.photo3d import Photo3D
-from ..scene.pointcloud import PointCloud
 from .consistency import (
     DEFAULT_LONG_GAP, ViewGeometry, long_range_pairs, masked_rmse, short_range_pairs, view_geometry, warp_view,
 )
@@ -233,44 +232,6 @@ def warp_rmse(frames: Mapping[str, Sequence[np.ndarray]], cameras: Cameras, geom
 
 
 # ----------------------------------------------------------------------------- stylize-then-bake
-
-
-def hidden_layer_image(ldi: LDI) -> np.ndarray:
-    """(Hc, Wc, 3) the hidden layer's colours at their canvas pixels, layer 0's colours elsewhere.
-
-    The layer-0 colours around the hidden pixels give the 2D network the
-    context a painting of the hidden surface needs; only the hidden pixels are
-    read back (:func:`layer_colours`).
-    """
-    if not isinstance(ldi, LDI):
-        raise InputError("ldi", f"expected an LDI, got {type(ldi).__name__}")
-    return np.where(ldi.hidden_mask[..., None], ldi.hidden_rgb, ldi.rgb).astype(np.float32)
-
-
-def layer_colours(points: PointCloud, ldi: LDI, layer0: np.ndarray, layer1: np.ndarray) -> np.ndarray:
-    """(N, 3) float32: each point's colour read from the canvas image of its own layer.
-
-    A point is projected into the photo's camera (the world frame), which puts it
-    at the centre of its canvas pixel ``(row, col) = (v + pad, u + pad)``
-    (:func:`~stylize3d_core.scene.pointcloud.ldi_to_points`); hidden points
-    (label ``INPAINTED``) read ``layer1``, the others ``layer0``, both (Hc, Wc, 3).
-    With ``layer0 = ldi.rgb`` and ``layer1 = hidden_layer_image(ldi)`` this gives back the points' colours.
-    """
-    if not isinstance(points, PointCloud):
-        raise InputError("points", f"expected a PointCloud, got {type(points).__name__}")
-    hc, wc = ldi.canvas_size
-    for name, img in (("layer0", layer0), ("layer1", layer1)):
-        check_shape(img, name, (hc, wc, 3))
-    h, w = ldi.photo_size
-    f = focal_from_fov(points.fov_y_deg, h)
-    xyz = points.xyz.astype(np.float64)
-    z = np.where(xyz[:, 2] > 1e-9, xyz[:, 2], 1e-9)
-    col = np.clip(np.floor(f * xyz[:, 0] / z + w / 2.0 + ldi.pad), 0, wc - 1).astype(np.int64)
-    row = np.clip(np.floor(f * xyz[:, 1] / z + h / 2.0 + ldi.pad), 0, hc - 1).astype(np.int64)
-    hidden = points.label == INPAINTED
-    out = np.asarray(layer0, np.float32)[row, col]
-    out[hidden] = np.asarray(layer1, np.float32)[row[hidden], col[hidden]]
-    return out
 
 
 def baked_colours(photo3d: Photo3D, style_rgb: np.ndarray, *, strength: float = 1.0, engine=None) -> np.ndarray:

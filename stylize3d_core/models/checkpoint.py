@@ -3,11 +3,12 @@
 A checkpoint is one ``.safetensors`` file. Its metadata holds::
 
     format   "stylize3d-model"
-    version  "5"
+    version  "6"
     config   the ModelConfig as JSON (so the file alone rebuilds the model)
     stage    "1" (view synthesis) or "2" (stylization)
     info     free JSON: iterations, data, command, hours...
 
+Version "5" files have no style prior (``style_prior`` False; added in version 6).
 Version "4" files have no texture residual (``decoder.texture_channels`` 0; added in version 5).
 Version "3" files have no colour transform (``decoder.transform_channels`` 0)
 nor colour transfer (``detail_transfer`` False), both added in version 4, version "2" files no detail path either
@@ -41,8 +42,8 @@ from .scene_geometry import NeighbourhoodConfig
 from .stylize3d import ModelConfig, Stylize3DModel
 
 FORMAT = "stylize3d-model"
-VERSION = "5"
-READABLE_VERSIONS = ("1", "2", "3", "4", "5")
+VERSION = "6"
+READABLE_VERSIONS = ("1", "2", "3", "4", "5", "6")
 _V1_NEIGHBOURHOOD = ("k", "stem_radius", "stage_radii", "downsample", "fps_start")
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -88,7 +89,7 @@ def config_from_json(text: str, source: PathLike, version: str = VERSION) -> Mod
         return ModelConfig(
             name=d["name"], encoder=enc, neighbourhood=hood, stylizer=sty, raster_channels=int(d["raster_channels"]),
             decoder=dec, detail_channels=int(d.get("detail_channels", 0)),
-            detail_transfer=bool(d.get("detail_transfer", False)),
+            detail_transfer=bool(d.get("detail_transfer", False)), style_prior=bool(d.get("style_prior", False)),
         )
     except (ValueError, KeyError, TypeError, AttributeError) as e:
         raise InputError(source, f"the checkpoint's model configuration is unreadable ({e})") from None

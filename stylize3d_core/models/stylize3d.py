@@ -86,6 +86,8 @@ class ModelConfig:
         decoder: the U-Net; ``in_channels`` must equal ``raster_channels + detail_channels``.
         detail_transfer: with a style, the detail path carries the points' colours moved to the
             style's colour statistics (:mod:`.colour_transfer`); needs the detail path.
+        style_prior: with a style, the detail path carries the 2D style prior's painting of the
+            LDI's layers (:mod:`.style_prior`) instead; needs the detail path, excludes ``detail_transfer``.
     """
 
     name: ConfigName = "lite"
@@ -99,6 +101,7 @@ class ModelConfig:
                                                                               texture_channels=3))
     detail_channels: int = 3
     detail_transfer: bool = True
+    style_prior: bool = False
 
     def __post_init__(self) -> None:
         if not isinstance(self.neighbourhood, NeighbourhoodConfig):
@@ -118,6 +121,9 @@ class ModelConfig:
                              f"raster_channels {self.raster_channels} + detail_channels {self.detail_channels}")
         if self.detail_transfer and not self.detail_channels:
             raise InputError("ModelConfig.detail_transfer", "needs the detail path (detail_channels 3)")
+        if self.style_prior and (not self.detail_channels or self.detail_transfer):
+            raise InputError("ModelConfig.style_prior", "needs the detail path (detail_channels 3) and "
+                                                        "detail_transfer False")
         if self.decoder.transform_channels not in (0, self.detail_channels):
             raise InputError("ModelConfig", f"the decoder's colour transform recolours the detail path's "
                              f"{self.detail_channels} channels; got transform_channels "
@@ -332,11 +338,28 @@ def add_texture_residual(model: Stylize3DModel) -> Stylize3DModel:
     return wide
 
 
+def add_style_prior(model: Stylize3DModel) -> Stylize3DModel:
+    """A copy of a model with the colour transform whose detail path carries the 2D style prior's colours
+    (``style_prior`` True, ``detail_transfer`` False), its transform set to the identity and its texture
+    residual to zero: every covered pixel shows the rasterized prior colours and the U-Net fills the holes,
+    until training moves them. The encoder, stylizer and U-Net weights are kept."""
+    cfg = model.config
+    if not cfg.decoder.transform_channels:
+        raise InputError("model", "has no colour transform for the prior's colours: add_colour_transform first")
+    wide = Stylize3DModel(replace(cfg, detail_transfer=False, style_prior=True))
+    wide.load_state_dict(model.state_dict())
+    identity_transform(wide.decoder.transform, True)
+    if cfg.decoder.texture_channels:
+        zero_texture(wide.decoder.out_rgb)
+    wide.train(model.training)
+    return wide
+
+
 def count_parameters(module: nn.Module) -> int:
     """Number of trainable parameters."""
     return sum(p.numel() for p in module.parameters() if p.requires_grad)
 
 
 __all__ = [
-    "DETAIL_CHANNELS", "add_colour_transform", "add_detail_path", "add_texture_residual", "ModelConfig", "NeighbourhoodConfig", "SceneGeometry", "prepare_geometry", "Stylize3DModel", "count_parameters",
+    "DETAIL_CHANNELS", "add_colour_transform", "add_detail_path", "add_style_prior", "add_texture_residual", "ModelConfig", "NeighbourhoodConfig", "SceneGeometry", "prepare_geometry", "Stylize3DModel", "count_parameters",
 ]

@@ -140,9 +140,27 @@ def test_version_1_layout_is_mapped_to_the_neighbourhood_config(tmp_path):
     _with_metadata(good, bad, version="1")
     with pytest.raises(InputError, match="mixed.safetensors.*configuration is unreadable"):
         load_checkpoint(bad)
-    _with_metadata(good, bad, version="6")
-    with pytest.raises(InputError, match="version .6. is not supported"):
+    _with_metadata(good, bad, version="7")
+    with pytest.raises(InputError, match="version .7. is not supported"):
         load_checkpoint(bad)
+
+
+def test_style_prior_round_trips_and_older_files_have_none(tmp_path):
+    from stylize3d_core.models.stylize3d import add_style_prior
+
+    m = add_style_prior(_model())
+    assert m.config.style_prior and not m.config.detail_transfer
+    path = save_checkpoint(tmp_path / "p.safetensors", m, 2, {})
+    assert load_checkpoint(path).model.config == m.config
+    d = json.loads(config_to_json(m.config))
+    del d["style_prior"]
+    d["detail_transfer"] = True
+    old = tmp_path / "v5.safetensors"
+    _with_metadata(save_checkpoint(tmp_path / "plain.safetensors", _model(), 2, {}), old, version="5",
+                   config=json.dumps(d))
+    assert load_checkpoint(old).model.config.style_prior is False
+    with pytest.raises(InputError, match="style_prior"):
+        ModelConfig(detail_transfer=True, style_prior=True)
 
 
 def test_shipped_checkpoint_is_the_current_lite_layout():

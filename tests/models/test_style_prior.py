@@ -1,0 +1,100 @@
+"""The 2D style prior: the network with free spatial sizes, style vectors, painting, readability, bad inputs."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from stylize3d_core.errors import InputError
+from stylize3d_core.models.style_prior import (
+    STYLE_VECTOR_SIZE, StylePrior, StylePriorSettings, _free_spatial_dims, _model_bytes, interpolate_vectors,
+    keep_readable,
+)
+
+
+@pytest.fixture(scope="module")
+def prior():
+    return StylePrior(StylePriorSettings(size=128, threads=1))
+
+
+def _stripes(h, w, period=8.0):
+    y, x = np.mgrid[0:h, 0:w].astype(np.float32)
+    return np.stack([0.5 + 0.4 * np.sin(x / period), 0.5 + 0.4 * np.cos(y / period), np.full_like(x, 0.4)], -1)
+
+
+def test_style_vector_is_stable_and_distinguishes_styles(prior):
+    a = prior.style_vector(_stripes(96, 80))
+    assert a.shape == (STYLE_VECTOR_SIZE,) and a.dtype == np.float32 and np.isfinite(a).all()
+    np.testing.assert_array_equal(a, prior.style_vector(_stripes(96, 80)))
+    b = prior.style_vector(np.full((64, 64, 3), 0.2, np.float32))
+    assert np.linalg.norm(a - b) > 0.1
+
+
+def test_paint_keeps_each_images_size_at_any_aspect(prior):
+    vec = prior.style_vector(_stripes(64, 64))
+    for h, w in ((50, 70), (130, 60), (33, 33)):
+        img = _stripes(h, w, 5.0)
+        out = prior.paint([img, img[::-1].copy()], vec)
+        assert [o.shape for o in out] == [(h, w, 3)] * 2
+        assert all(o.dtype == np.float32 and np.isfinite(o).all() and o.min() >= 0 and o.max() <= 1 for o in out)
+        assert not np.allclose(out[0], img, atol=0.05)  # it painted something
+    assert prior.work_size(300, 600) == (64, 128)  # long side settings.size, multiples of 4
+
+
+def test_the_transformer_runs_at_other_sizes_than_its_declared_one():
+    import onnx
+
+    model = onnx.load_from_string(_free_spatial_dims(_model_bytes("models/arbitrary_transform.onnx"), "t"))
+    dims = model.graph.input[0].type.tensor_type.shape.dim
+    assert [d.dim_param or d.dim_value for d in dims] == [1, "height", "width", 3]
+    with pytest.raises(InputError, match="ONNX"):
+        _free_spatial_dims(b"not a graph", "broken.onnx")
+
+
+def test_strength_interpolates_vectors():
+    own, style = np.zeros(STYLE_VECTOR_SIZE, np.float32), np.ones(STYLE_VECTOR_SIZE, np.float32)
+    np.testing.assert_allclose(interpolate_vectors(own, style, 0.25), 0.25)
+    np.testing.assert_array_equal(interpolate_vectors(own, style, 1.0), style)
+
+
+def test_flat_styles_still_show_the_scene(prior):
+    """A constant black or white style makes the network paint an almost flat image; the prior keeps at least
+    half the photo's lightness contrast, and the painted image still follows the photo's structure."""
+    photo = _stripes(96, 128, 6.0)
+    grey = lambda im: cv2.cvtColor(im, cv2.COLOR_RGB2LAB)[..., 0]  # noqa: E731
+    for colour in (0.0, 1.0):
+        vec = prior.style_vector(np.full((64, 64, 3), colour, np.float32))
+        out = prior.paint([photo], vec)[0]
+        assert grey(out).std() >= 0.5 * grey(photo).std() - 0.5
+        assert np.corrcoef(grey(out).ravel(), grey(photo).ravel())[0, 1] > 0.5
+        assert 5.0 < grey(out).mean() < 95.0
+
+
+def test_keep_readable_leaves_contrasty_paintings_alone_and_fixes_flat_ones():
+    ref = _stripes(40, 60)
+    painted = np.clip(_stripes(40, 60, 3.0)[..., ::-1] * 1.1, 0, 1).astype(np.float32)
+    np.testing.assert_array_equal(keep_readable([painted], ref, 0.5)[0], painted)
+    flat = np.full((40, 60, 3), 0.02, np.float32)
+    fixed = keep_readable([flat, flat], ref, 0.5)
+    lab = cv2.cvtColor(fixed[0], cv2.COLOR_RGB2LAB)[..., 0]
+    ref_std = cv2.cvtColor(ref, cv2.COLOR_RGB2LAB)[..., 0].std()
+    assert lab.std() == pytest.approx(0.5 * ref_std, rel=0.1)
+    np.testing.assert_array_equal(fixed[0], fixed[1])  # one map for every layer
+    assert keep_readable([flat], ref, 0.0)[0] is not None
+
+
+def test_bad_inputs(prior):
+    with pytest.raises(InputError, match="16 pixels"):
+        prior.style_vector(np.zeros((8, 40, 3), np.float32))
+    with pytest.raises(InputError, match="NaN"):
+        prior.style_vector(np.full((32, 32, 3), np.nan, np.float32))
+    with pytest.raises(InputError, match="same size"):
+        prior.paint([np.zeros((16, 16, 3)), np.zeros((16, 20, 3))], np.zeros(STYLE_VECTOR_SIZE))
+    with pytest.raises(InputError, match="finite"):
+        prior.paint([np.zeros((16, 16, 3))], np.zeros(7))
+    with pytest.raises(InputError):
+        StylePriorSettings(size=64)
+    with pytest.raises(InputError):
+        StylePriorSettings(min_contrast=2.0)
+    assert prior.paint([], np.zeros(STYLE_VECTOR_SIZE)) == []
