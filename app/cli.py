@@ -46,10 +46,17 @@ def _add_training(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--eval-samples", type=int, default=100, help="held-out samples (default 100)")
     p.add_argument("--size", type=int, default=128, help="sample image size in pixels (default 128)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--real", default=None, metavar="DIR",
+                   help="a folder with photos/ and paintings/: its training photos join the content photos, its "
+                        "held-out ones the eval photos (split by stylize3d_core/train/real_images.py)")
+    p.add_argument("--threads", type=int, default=1, help="torch threads while building samples (default 1: fastest on a busy machine)")
     p = sub.add_parser("prepare-styles", help="generate the style bank used by stage-2 training")
     p.add_argument("--out", default=d.styles_dir, help=f"folder (default {d.styles_dir})")
     p.add_argument("--count", type=int, default=300, help="number of style images (default 300)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--real", default=None, metavar="DIR",
+                   help="a folder with photos/ and paintings/: its training paintings join the bank "
+                        "(split by stylize3d_core/train/real_images.py)")
     p = sub.add_parser("prepare-teacher", help="stage 2: bake the 2D network's stylization of every training "
                                                "sample onto its points (consistent stylized targets)")
     p.add_argument("--data", default=d.data_dir + "/train", help="training samples (default runs/data/train)")
@@ -87,6 +94,9 @@ def _add_training(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--teacher-fraction", type=float, default=d.teacher_fraction,
                    help=f"stage 2: share of stylized samples that learn from their teacher "
                         f"(default {d.teacher_fraction})")
+    p.add_argument("--style-prior", action="store_true",
+                   help="stage 2: add the 2D style prior to the --init model (its detail path carries the 2D "
+                        "network's painting of the points; needs --teacher)")
     p.add_argument("--style-stages", default=",".join(map(str, d.style_stages)), metavar="S,S,...",
                    help="stage 2: EfficientNet stages (0-4) of the global style loss "
                         f"(default {','.join(map(str, d.style_stages))})")
@@ -144,11 +154,21 @@ def _info(args: argparse.Namespace) -> int:
 
 
 def _prepare_data(args: argparse.Namespace) -> int:
+    import dataclasses
+
     from stylize3d_core.train.cache import build_splits
     from stylize3d_core.train.data import DataConfig
+    from stylize3d_core.train.photos import EVAL_PHOTOS
 
-    train, held = build_splits(args.out, args.samples, args.eval_samples, DataConfig(image_size=(args.size, args.size)),
-                               args.seed)
+    config, eval_config = DataConfig(image_size=(args.size, args.size)), None
+    if args.real is not None:
+        from stylize3d_core.train.real_images import split_real_images
+
+        split = split_real_images(args.real)
+        eval_config = dataclasses.replace(config, photos=EVAL_PHOTOS + tuple(str(p) for p in split.eval_photos))
+        config = dataclasses.replace(config, photos=config.photos + tuple(str(p) for p in split.train_photos))
+    train, held = build_splits(args.out, args.samples, args.eval_samples, config, args.seed, threads=args.threads,
+                               eval_config=eval_config)
     for r in (train, held):
         print(f"{PROG}: {r.root}: {r.generated} generated, {r.skipped} already there, "
               f"{len(r.regenerated)} regenerated ({r.seconds:.0f} s)", file=sys.stderr)
@@ -160,6 +180,12 @@ def _prepare_styles(args: argparse.Namespace) -> int:
 
     entries = build_style_bank(args.out, args.count, seed=args.seed)
     print(f"{PROG}: wrote {len(entries)} style images to {args.out}", file=sys.stderr)
+    if args.real is not None:
+        from stylize3d_core.train.real_images import split_real_images
+        from stylize3d_core.train.styles import add_real_paintings
+
+        real = add_real_paintings(args.out, split_real_images(args.real).train_paintings)
+        print(f"{PROG}: added {len(real)} real paintings to {args.out}", file=sys.stderr)
     return 0
 
 
@@ -210,7 +236,7 @@ def _train(args: argparse.Namespace) -> int:
         checkpoint_every=args.checkpoint_every, log_every=args.log_every,
         max_hours=args.hours, init=args.init, init_stylizer=args.init_stylizer, seed=args.seed,
         threads=args.threads, weights=_loss_weights(args.weight), recon_fraction=args.recon_fraction,
-        teacher_dir=args.teacher, teacher_fraction=args.teacher_fraction,
+        teacher_dir=args.teacher, teacher_fraction=args.teacher_fraction, style_prior=args.style_prior,
         style_stages=_stages(args.style_stages), style_crop=tuple(args.style_crop),
     )
     path = train(config, log=lambda msg: print(f"{PROG}: {msg}", file=sys.stderr, flush=True))

@@ -318,11 +318,14 @@ def _stale_reason(path: Path, key: str, seed: int, index: int) -> Optional[str]:
 
 
 def build_splits(
-    root: PathLike, n_train: int, n_eval: int, config: DataConfig = DataConfig(), seed: int = 0, *, threads: int = 1
+    root: PathLike, n_train: int, n_eval: int, config: DataConfig = DataConfig(), seed: int = 0, *, threads: int = 1,
+    eval_config: Optional[DataConfig] = None,
 ) -> Tuple[BuildReport, BuildReport]:
-    """``root/train`` with ``(config, seed)`` and ``root/eval`` on the held-out photos with another seed."""
+    """``root/train`` with ``(config, seed)`` and ``root/eval`` with another seed on ``eval_config`` (None: the
+    held-out photos, :func:`~.data.held_out_config`)."""
     train = build_dataset(Path(root) / "train", n_train, config, seed, threads=threads)
-    held = build_dataset(Path(root) / "eval", n_eval, held_out_config(config), seed + EVAL_SEED_OFFSET, threads=threads)
+    held_config = held_out_config(config) if eval_config is None else eval_config
+    held = build_dataset(Path(root) / "eval", n_eval, held_config, seed + EVAL_SEED_OFFSET, threads=threads)
     return train, held
 
 

@@ -23,7 +23,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import List, NamedTuple, Tuple
+from typing import List, NamedTuple, Sequence, Tuple
 
 import numpy as np
 import torch
@@ -165,6 +165,24 @@ def build_style_bank(
     with atomic_path(root / "styles.json") as tmp:
         tmp.write_text(json.dumps({"seed": seed, "config": repr(config), "styles": [e._asdict() for e in entries]},
                                   indent=1))
+    return entries
+
+
+def add_real_paintings(out_dir: PathLike, paintings: Sequence[PathLike], max_size: int = 512) -> List[StyleEntry]:
+    """Write each painting file into the bank ``out_dir`` as ``real_<stem>.png`` (long side at most
+    ``max_size``) and list them in ``real.json``; files already there are kept. Returns their entries."""
+    check_range(max_size, "max_size", 32, 4096)
+    root = Path(out_dir)
+    root.mkdir(parents=True, exist_ok=True)
+    entries: List[StyleEntry] = []
+    for path in paintings:
+        src = Path(path)
+        name = f"real_{src.stem}.png"
+        if not (root / name).is_file():
+            save_image(root / name, load_image(src, max_size=max_size).rgb)
+        entries.append(StyleEntry(name, "real painting", f"the file {src.name}"))
+    with atomic_path(root / "real.json") as tmp:
+        tmp.write_text(json.dumps({"styles": [e._asdict() for e in entries]}, indent=1))
     return entries
 
 

@@ -53,10 +53,11 @@ from ..models.losses import (PerceptualLoss, PerceptualLossConfig, StylizationLo
                              colour_statistics_loss, detail_loss, sharpness_loss)
 from ..models.style_features import StyleEncoder
 from ..models.stylize3d import (ConfigName, ModelConfig, Stylize3DModel, add_colour_transform, add_detail_path,
+                                add_style_prior,
                                 add_texture_residual)
 from ..render.reproject import pairwise_consistency, sample_view
 from .cache import TrainDataset
-from .data import TrainSample
+from .data import TrainSample, from_u8
 from .styles import StyleBank
 from .teacher import TeacherSet, teacher_targets
 
@@ -136,7 +137,10 @@ class TrainConfig:
         threads: torch CPU threads (None: torch's default).
         teacher_dir: stage 2, a folder written by :func:`~.teacher.build_teacher` for ``data_dir``; None: no teacher.
         teacher_fraction: stage 2, share of the stylized samples that use their teacher (the rest take a
-            random style crop and only the AdaAttN losses).
+            random style crop and only the AdaAttN losses). Models with the style prior use it for every
+            stylized sample (they need its baked colours).
+        style_prior: stage 2, start from ``init`` with the 2D style prior added
+            (:func:`~stylize3d_core.models.stylize3d.add_style_prior`); ignored when the run resumes.
         style_stages: stage 2, the EfficientNet stages (0..4) whose feature mean/std the global style
             loss matches (default (1, 2), the public code's; the quality benchmark's EfficientNet
             distance measures stages 1-3).
@@ -169,6 +173,7 @@ class TrainConfig:
     threads: Optional[int] = None
     teacher_dir: Optional[str] = None
     teacher_fraction: float = 0.7
+    style_prior: bool = False
     style_stages: Tuple[int, ...] = StylizationLossConfig.style_stages
     style_crop: Tuple[float, float] = (0.5, 1.0)
 
@@ -187,6 +192,8 @@ class TrainConfig:
         if self.teacher_dir is not None and self.stage != 2:
             raise InputError("teacher_dir", "the teacher trains stylization: stage 2 only")
         check_range(self.teacher_fraction, "teacher_fraction", 0.0, 1.0)
+        if self.style_prior and (self.stage != 2 or self.teacher_dir is None):
+            raise InputError("style_prior", "the style prior trains in stage 2 with a teacher (--teacher)")
         stages = tuple(self.style_stages)
         if not stages or len(set(stages)) != len(stages) or any(
                 not isinstance(s, int) or not 0 <= s <= 4 for s in stages):
@@ -240,9 +247,11 @@ class TrainStep(nn.Module):
         self.consistency_points = consistency_points
 
     def forward(self, sample: TrainSample, style: Optional[torch.Tensor], generator: torch.Generator,
-                teacher: Optional[Tuple[torch.Tensor, torch.Tensor]] = None) -> Dict[str, torch.Tensor]:
+                teacher: Optional[Tuple[torch.Tensor, torch.Tensor]] = None,
+                prior: Optional[torch.Tensor] = None) -> Dict[str, torch.Tensor]:
         """The weighted loss terms of one sample; ``teacher``: (targets (V, 3, H, W), masks (V, H, W)) of the
-        style baked by the 2D network (stylized samples only)."""
+        style baked by the 2D network (stylized samples only); ``prior``: (N, 3) the points' baked colours,
+        which a model with the style prior carries on its detail path (stylized samples need it)."""
         geom = sample.geometry
         content = self.model.encode(geom)  # (M, C)
         if style is not None:
@@ -253,6 +262,11 @@ class TrainStep(nn.Module):
         colours = None
         if style is not None and self.model.config.detail_transfer:
             colours = transfer_colours(geom.rgb, lab_stats(style))  # the style's colour statistics, at strength 1
+        if style is not None and self.model.config.style_prior:
+            if prior is None:
+                raise InputError("prior", "a model with the style prior trains stylized samples on their teacher's "
+                                          "baked colours (train with --teacher)")
+            colours = prior.to(geom.rgb.device, geom.rgb.dtype)
         dense = self.model.dense_features(feats, geom, colours)  # (N, Cr)
         H, W = sample.image_size
         views, zbufs = [], []
@@ -345,6 +359,9 @@ def train(config: TrainConfig, log: Log = print) -> Path:
             and ModelConfig.by_name(config.model).decoder.texture_channels):
         model = add_texture_residual(model)
         log("added the texture residual to the initial model (zero weights: same output)")
+    if state is None and config.style_prior and not model.config.style_prior:
+        model = add_style_prior(model)
+        log("added the 2D style prior to the initial model (identity transform: it renders the prior's colours)")
     if state is None and config.init_stylizer is not None:
         donor = load_checkpoint(config.init_stylizer).model
         if donor.config.stylizer != model.config.stylizer or donor.config.encoder != model.config.encoder:
@@ -396,9 +413,12 @@ def train(config: TrainConfig, log: Log = print) -> Path:
         recon = config.stage == 2 and rng.random() < config.recon_fraction
         for b, i in enumerate(indices):
             sample = data[int(i)]
-            style, teach = None, None
+            style, teach, prior = None, None, None
             if styles is not None and not recon:
-                use_teacher = teachers is not None and int(i) < len(teachers) and rng.random() < config.teacher_fraction
+                use_teacher = teachers is not None and int(i) < len(teachers) and (
+                    model.config.style_prior or rng.random() < config.teacher_fraction)
+                if model.config.style_prior and not use_teacher:
+                    continue  # its stylized samples are the teacher's: a sample without one trains nothing here
                 if use_teacher:
                     entry = teachers.entry(int(i), sample.num_points)
                     slot = int(rng.integers(0, len(entry.styles)))
@@ -407,13 +427,15 @@ def train(config: TrainConfig, log: Log = print) -> Path:
                     k = style_index[entry.styles[slot]]
                     style = styles.crop(k, rng, STYLE_CROP, min_scale=1.0).to(device)  # the whole style image
                     teach = teacher_targets(sample, entry.rgb[slot])
+                    if model.config.style_prior:
+                        prior = from_u8(entry.rgb[slot])
                 else:
                     lo, hi = config.style_crop
                     style = styles.sample(rng, STYLE_CROP, lo, hi)[0].to(device)
             sync = world > 1 and b < len(indices) - 1
             ctx = ddp.no_sync() if sync else contextlib.nullcontext()
             with ctx:
-                terms = ddp(sample, style, gen, teach)
+                terms = ddp(sample, style, gen, teach, prior)
                 loss = sum(terms.values()) / len(indices)
                 if not torch.isfinite(loss):
                     raise FloatingPointError(f"non-finite loss at iteration {it}: { {k: float(v) for k, v in terms.items()} }")
