@@ -127,6 +127,12 @@ def _add_bench(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--style", default=None, help="style image (default the shipped style)")
     p.add_argument("--model", default=None, help="quality: the checkpoint measured (default the shipped model)")
     p.add_argument("--eval-data", default=None, help="quality: held-out dataset folder for stage-1 PSNR/SSIM")
+    p.add_argument("--real", default=None, metavar="DIR",
+                   help="quality: measure held-out real photos x real paintings of DIR (photos/, paintings/; "
+                        "stylize3d_core/train/real_images.py) and write blind boards, instead of the built-in set")
+    p.add_argument("--pairs", type=int, default=16, help="quality --real: number of pairs (default 16)")
+    p.add_argument("--compare", action="append", default=[], metavar="NAME=CHECKPOINT",
+                   help="quality --real: another checkpoint measured beside --model (repeatable)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar, print nothing but errors")
 
 
@@ -260,6 +266,23 @@ def _bench(args: argparse.Namespace) -> int:
     from stylize3d_core.bench.suites import run_suite
 
     log = (lambda _msg: None) if args.quiet else (lambda msg: print(f"{PROG}: {msg}", file=sys.stderr))
+    if args.real is not None:
+        if args.suite != "quality":
+            raise InputError("--real", f"measures the quality suite, not {args.suite!r}")
+        from pathlib import Path
+
+        from stylize3d_core.bench.real_quality import run_real_quality
+
+        others = {}
+        for item in args.compare:
+            name, sep, path = item.partition("=")
+            if not sep or not name or not path:
+                raise InputError("--compare", f"expected NAME=CHECKPOINT, got {item!r}")
+            others[name] = path
+        run_real_quality(Path(args.out), args.real, model=args.model, others=others, pairs=args.pairs, log=log)
+        if not args.quiet:
+            print(f"{PROG}: bench quality: {args.out}/real_quality.md and the boards", file=sys.stderr)
+        return 0
     rows = run_suite(args.suite, args.out, quick=args.quick, show_progress=not args.quiet, log=log,
                      photo=args.photo, style=args.style, model=args.model, eval_data=args.eval_data)
     if not args.quiet:

