@@ -39,7 +39,7 @@ MODELS: Dict[str, str] = {"lite": "model/stylize3d_lite.safetensors"}
 DEFAULT_MODEL_NAME = "lite"
 SAMPLE_PHOTO_NAME = "coffee.jpg"
 """The sample photo the README, the viewer's "Open bundled sample" and the wheel test use."""
-SAMPLE_STYLE_NAME = "painting_style19_chelsea.jpg"
+SAMPLE_STYLE_NAME = "vangogh_starry_night.jpg"
 """The style image that goes with :data:`SAMPLE_PHOTO_NAME`."""
 
 _PHOTO_SUFFIXES = (".jpg", ".jpeg", ".png", ".webp", ".tif", ".tiff")

@@ -37,7 +37,7 @@ def test_the_shipped_files_are_found_and_are_the_repository_assets():
     assert loc.how in (resources.INSTALLED, resources.CHECKOUT)
     assert _sha(resources.model_path("lite")) == _sha(REPO / "assets/model/stylize3d_lite.safetensors")
     assert _sha(resources.sample_photo()) == _sha(REPO / "assets/samples/coffee.jpg")
-    assert _sha(resources.style_image()) == _sha(REPO / "assets/styles/painting_style19_chelsea.jpg")
+    assert _sha(resources.style_image()) == _sha(REPO / "assets/styles/vangogh_starry_night.jpg")
     assert {"astronaut.jpg", "chelsea.jpg", "coffee.jpg", "rocket.jpg"} <= set(resources.sample_names())
     assert "texture_voronoi_seed7.jpg" in resources.style_names()
     assert "README.md" not in resources.style_names()

@@ -102,7 +102,7 @@ def test_the_wheel_carries_every_package_the_model_samples_and_styles(built):
             assert init.relative_to(REPO).as_posix() in names, f"{init.parent} is missing from pyproject's packages"
     for name in ("model/stylize3d_lite.safetensors", "model/selfie_segmentation.onnx", "model/LICENSE-mediapipe.txt",
                  "model/README.md", "samples/coffee.jpg",
-                 "styles/painting_style19_chelsea.jpg", "styles/README.md"):
+                 "styles/painting_style19_chelsea.jpg", "styles/vangogh_starry_night.jpg", "styles/README.md"):
         assert f"stylize3d_assets/{name}" in names
     assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names)
     assert not any(n.startswith(("tests/", "benchmarks/", "assets/")) or n.endswith(".jsonl") for n in names)
