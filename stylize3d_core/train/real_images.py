@@ -16,15 +16,20 @@ holds out the same files:
   hashes into the lowest :data:`HELD_OUT_SHARE` are held out.
 
 The hash is BLAKE2b of the file name (not the path), read as a fraction in [0, 1).
+
+Paintings whose bytes equal one of the bundled sample styles (``assets/styles``)
+are on neither side: a sample style the README shows is never a training image,
+and never an evaluation pair the model might have been tuned on.
 """
 
 from __future__ import annotations
 
 import hashlib
 from pathlib import Path
-from typing import List, NamedTuple, Tuple
+from typing import FrozenSet, Iterable, List, NamedTuple, Optional, Tuple
 
 from ..errors import InputError, PathLike
+from ..resources import style_image, style_names
 
 IMAGE_SUFFIXES: Tuple[str, ...] = (".jpg", ".jpeg", ".png")
 HELD_OUT_PHOTO_SOURCES: Tuple[str, ...] = ("kodak",)
@@ -65,10 +70,23 @@ def _images(folder: Path) -> List[Path]:
     return files
 
 
-def split_real_images(root: PathLike) -> RealImageSplit:
-    """Split ``root/photos`` and ``root/paintings`` (see the module docstring)."""
+def content_digest(path: Path) -> str:
+    """BLAKE2b of a file's bytes (hex)."""
+    return hashlib.blake2b(path.read_bytes(), digest_size=16).hexdigest()
+
+
+def _digests(paths: Iterable[Path]) -> FrozenSet[str]:
+    return frozenset(content_digest(p) for p in paths)
+
+
+def split_real_images(root: PathLike, exclude: Optional[Iterable[PathLike]] = None) -> RealImageSplit:
+    """Split ``root/photos`` and ``root/paintings`` (see the module docstring). Paintings with the same
+    bytes as a file of ``exclude`` (default: the bundled sample styles) are left out of both sides."""
     base = Path(root)
     photos, paintings = _images(base / "photos"), _images(base / "paintings")
+    excluded = _digests(Path(p) for p in ([style_image(n) for n in style_names()] if exclude is None else exclude))
+    if excluded:
+        paintings = [p for p in paintings if content_digest(p) not in excluded]
     eval_photo = [p for p in photos
                   if source_of(p.name) in HELD_OUT_PHOTO_SOURCES or name_fraction(p.name) < HELD_OUT_SHARE]
     eval_painting = [p for p in paintings if source_of(p.name) not in TRAIN_ONLY_PAINTING_SOURCES
@@ -80,5 +98,5 @@ def split_real_images(root: PathLike) -> RealImageSplit:
     )
 
 
-__all__ = ["RealImageSplit", "split_real_images", "name_fraction", "source_of", "HELD_OUT_SHARE",
+__all__ = ["RealImageSplit", "split_real_images", "content_digest", "name_fraction", "source_of", "HELD_OUT_SHARE",
            "HELD_OUT_PHOTO_SOURCES", "TRAIN_ONLY_PAINTING_SOURCES"]

@@ -48,3 +48,16 @@ def test_bad_folders(tmp_path):
     _folder(tmp_path, [], ["wga_1.png"])
     with pytest.raises(InputError, match="no images"):
         split_real_images(tmp_path)
+
+
+def test_sample_styles_are_on_neither_side(tmp_path):
+    from stylize3d_core.resources import SAMPLE_STYLE_NAME, style_image
+
+    root = _folder(tmp_path, ["cc0_1.png"], [f"wga_{i:03d}.png" for i in range(30)])
+    shipped = style_image(SAMPLE_STYLE_NAME)
+    (root / "paintings" / "wga_copy.jpg").write_bytes(shipped.read_bytes())  # a sample style under another name
+    s = split_real_images(root)
+    names = {p.name for p in s.train_paintings + s.eval_paintings}
+    assert "wga_copy.jpg" not in names and len(names) == 30
+    kept = split_real_images(root, exclude=[])
+    assert "wga_copy.jpg" in {p.name for p in kept.train_paintings + kept.eval_paintings}
