@@ -468,9 +468,9 @@ def test_border_margin_rounds_to_the_decoder_stride_and_respects_the_fov_limit()
 
 
 def test_border_margin_decodes_the_frame_edge_as_its_inside():
-    """The U-Net's zero padding changes its outermost pixels (the shipped model: a coloured rim ~8 pixels
-    wide); with the margin a frame's edge matches the same pixels decoded inside a larger frame (the
-    reference: a frame 16 pixels wider on each side)."""
+    """The U-Net's zero padding can change a frame's outermost pixels (a coloured rim); with the margin a
+    frame's edge matches the same pixels decoded inside a larger frame (the reference: a frame 16 pixels
+    wider on each side), and is never further from it than without the margin."""
     from stylize3d_core.io.images import load_image
     from stylize3d_core.pipeline import PhotoSpec, load_photo3d
     from stylize3d_core.resources import resolve_model, sample_photo, style_image
@@ -493,8 +493,7 @@ def test_border_margin_decodes_the_frame_edge_as_its_inside():
     err_guarded = float(np.abs(guarded - ref)[rim].mean())
     print(f"edge error against the inside decoding: {255 * err_plain:.2f} levels without the margin, "
           f"{255 * err_guarded:.2f} with it")
-    assert err_plain > 4 / 255  # the rim this guards against is there
-    assert err_guarded < 0.2 * err_plain
+    assert err_guarded < 1 / 255 and err_guarded <= err_plain + 1e-6
 
 
 def test_a_model_that_makes_non_finite_features_is_refused_once(tmp_path):

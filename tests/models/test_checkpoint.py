@@ -1,4 +1,5 @@
 import json
+from dataclasses import replace
 
 import pytest
 import torch
@@ -170,8 +171,9 @@ def test_shipped_checkpoint_is_the_current_lite_layout():
 
     with safe_open(str(DEFAULT_MODEL), framework="pt") as f:
         meta = f.metadata()
-    assert meta["version"] == "5"
+    assert meta["version"] == "6"
     ck = load_checkpoint(DEFAULT_MODEL)
-    assert ck.model.config == ModelConfig.lite()  # detail path, colour transform, texture residual, colour transfer
+    # the lite layout with the 2D style prior on its detail path (in place of the colour transfer)
+    assert ck.model.config == replace(ModelConfig.lite(), style_prior=True, detail_transfer=False)
     assert ck.model.config.neighbourhood == NeighbourhoodConfig()
     assert ck.info["hours_total"] > 0 and "provenance" in ck.info
