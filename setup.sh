@@ -1,14 +1,15 @@
 #!/usr/bin/env bash
 # Installs whatever stylize3d still lacks on this machine, then returns quickly on
 # later runs. Debian (or Ubuntu) with Python >= 3.10; no GPU needed.
-#   1. the Debian libraries Open3D needs (and Xvfb for the window tests),
+#   1. the Debian libraries Open3D needs (and Xvfb for the window tests, Chromium for the web-page test),
 #   2. a virtual environment in .venv,
 #   3. torch as the local CPU build (torch==2.13.0, never a multi-GB CUDA build),
 #   4. stylize3d itself (editable) with its test dependencies.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")"
 
-DEBIAN_PACKAGES=(libusb-1.0-0 libvulkan1 mesa-vulkan-drivers libgl1 libegl1 libgomp1 xvfb xauth)
+# chromium and chromium-driver: the browser test of the web-page export (tests/export/test_web_page_browser.py).
+DEBIAN_PACKAGES=(libusb-1.0-0 libvulkan1 mesa-vulkan-drivers libgl1 libegl1 libgomp1 xvfb xauth chromium chromium-driver)
 TORCH_REQUIREMENT="torch==2.13.0"
 
 missing=()

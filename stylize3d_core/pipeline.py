@@ -24,7 +24,7 @@ from .geometry.trajectories import TrajectoryName, TrajectorySettings, make_traj
 from .export.camera_paths import read_camera_path, write_camera_path
 from .export.frames import output_kind, write_frames
 from .export.layered import LayerSettings
-from .export.settings import POINT_KINDS, ExportSettings
+from .export.settings import PAGE_KINDS, POINT_KINDS, ExportSettings
 from .io.camera_path import MAX_FRAMES, CameraPath, save_camera_path
 from .io.images import load_image
 from .io.ply import write_ply
@@ -150,7 +150,7 @@ class RenderJob:
         if self.camera_path is None and self.frames > self.max_frames:
             raise InputError("frames", f"{self.frames:,} frames are more than max_frames={self.max_frames:,}; "
                                        "raise max_frames (--max-frames) for a longer video")
-        if self.exports.export not in POINT_KINDS and self.camera_path is None \
+        if self.exports.export not in POINT_KINDS + PAGE_KINDS and self.camera_path is None \
                 and output_kind(self.output) == "gif" and self.fps > MAX_GIF_FPS:
             raise InputError("fps", f"a GIF plays at most {MAX_GIF_FPS:g} fps, got {self.fps!r}")
         if self.views is not None and (self.layers.active or self.spec.stereo_card):
@@ -173,8 +173,11 @@ def _check_destination(path: str, what: str, suffixes: Tuple[str, ...]) -> None:
 def check_outputs(job: RenderJob) -> None:
     """Check every output path of ``job`` (extension, existing folder, no clashes) before anything is written."""
     out = Path(job.output)
-    kind = "ply" if job.exports.export in POINT_KINDS else output_kind(job.output)  # InputError: unknown suffix
-    if kind == "ply":
+    kind = "ply" if job.exports.export in POINT_KINDS else "html" if job.exports.export in PAGE_KINDS \
+        else output_kind(job.output)  # InputError: unknown suffix
+    if kind == "html":
+        _check_destination(job.output, "--export html's web page", (".html", ".htm"))
+    elif kind == "ply":
         _check_destination(job.output, f"--export {job.exports.export}'s point file", (".ply",))
     elif kind == "png":
         parent = out.parent if str(out.parent) else Path(".")
@@ -375,7 +378,8 @@ def run_render(job: RenderJob, *, progress: Optional[Progress] = None, log: Log 
     style_inputs = _check_style_inputs(job) if job.style is not None else None
     loaded_path = (read_camera_path(job.camera_path, max_frames=job.max_frames)
                    if job.camera_path is not None else None)
-    if loaded_path is not None and loaded_path.fps is not None and output_kind(job.output) == "gif" \
+    if loaded_path is not None and loaded_path.fps is not None \
+            and job.exports.export not in POINT_KINDS + PAGE_KINDS and output_kind(job.output) == "gif" \
             and loaded_path.fps > MAX_GIF_FPS:
         raise InputError(job.camera_path, f"its {loaded_path.fps:g} fps is too fast for a GIF "
                                           f"(at most {MAX_GIF_FPS:g})")
@@ -409,6 +413,14 @@ def run_render(job: RenderJob, *, progress: Optional[Progress] = None, log: Log 
         out = export_points(job.output, job.exports, p3d, renderer, stylized=job.style is not None)
         timings["bake+write"] = time.perf_counter() - t0
         log(f"wrote {out}: {len(p3d.points):,} points ({job.exports.export})")
+        return RenderResult(Path(out), 0, (H, W), len(p3d.points), timings)
+    if job.exports.export in PAGE_KINDS:
+        from .export.run import export_page
+
+        out = export_page(job.output, job.exports, p3d, renderer, job.style is not None, cameras, fps,
+                          title=Path(job.spec.photo).stem)
+        timings["bake+write"] = time.perf_counter() - t0
+        log(f"wrote {out}: {Path(out).stat().st_size / 2 ** 20:.1f} MB web page")
         return RenderResult(Path(out), 0, (H, W), len(p3d.points), timings)
     from .export.run import export_frames
 

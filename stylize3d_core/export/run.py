@@ -17,6 +17,7 @@ from .loop import boomerang, boomerang_length
 from .settings import POINT_KINDS, STEREO_KINDS, ExportSettings
 from .splat import point_footprints, write_splat_ply
 from .stereo import check_eye_distance, stereo_frames
+from .web_page import orbit_centre, write_page
 
 
 def check_point_output(path: str, settings: ExportSettings) -> None:
@@ -46,6 +47,21 @@ def export_points(path: str, settings: ExportSettings, photo: Photo3D, renderer:
         footprint = point_footprints(pts.xyz, photo.fov_y_deg, photo.size[0])
         return write_splat_ply(path, pts.xyz, rgb, footprint, scale_factor=settings.splat_scale)
     raise InputError("export", f"{settings.export!r} is not a point export ({', '.join(POINT_KINDS)})")
+
+
+def export_page(path: str, settings: ExportSettings, photo: Photo3D, renderer: ViewRenderer, stylized: bool,
+                cameras: Cameras, fps: float, title: str = "3D photo") -> Path:
+    """Write the photo as one web page (``export`` "html", :mod:`.web_page`): the points with the colours
+    :func:`point_colours` gives them, orbiting within ``photo.camera_range`` about the desktop viewer's centre,
+    the ``cameras`` played at ``fps``."""
+    if Path(path).suffix.lower() not in (".html", ".htm"):
+        raise InputError(path, "--export html writes a web page: the output must end in .html or .htm")
+    rgb = point_colours(photo, renderer, stylized)
+    pts = photo.points
+    scene = orbit_centre(photo.ldi.depth[photo.ldi.photo_region])  # the desktop viewer's (session.py)
+    return write_page(path, pts.xyz, rgb, photo.size, photo.fov_y_deg, photo.camera_range, scene,
+                      trajectory=cameras, fps=fps, max_points=settings.max_points,
+                      max_bytes=int(settings.html_max_mb * 2 ** 20), title=title)
 
 
 def export_frames(settings: ExportSettings, photo: Photo3D, renderer: ViewRenderer, cameras: Cameras,
