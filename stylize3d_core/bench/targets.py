@@ -218,7 +218,7 @@ def run_targets(out: Path, quick: bool = False, show_progress: bool = False, log
             "<= 6 GiB", big["peak_rss_gib"], "GiB", big["peak_rss_gib"] <= 6, ""),
     ]
     stages = ", ".join(f"{k} {v:.2f}" for k, v in one["stages"].items())
-    write_table(Path(out), "targets", "Targets (issue 12)", rows, notes=[
+    write_table(Path(out), "targets", "Targets", rows, notes=[
         f"{mp}; torch threads {one['threads']}; fresh process per photo size, model and style CNN loaded first "
         "(not counted)" + (" (--quick preset: tiny sizes, the targets do not apply)" if quick else ""),
         f"preview and full frame: median over {p.renders} cameras of the circle after one warm-up; the preview "
