@@ -11,7 +11,9 @@
   original colours); the session renders through :class:`~app.viewer.layers.ViewerLayers`.
 * **Exports**: baked-colour PLY, 3D Gaussian splat ``.ply``, side-by-side (full
   or half width) and red-cyan anaglyph videos with an eye distance, boomerang
-  loops (MP4, GIF, WebP), camera paths as stylize3d JSON and Open3D trajectory.
+  loops (MP4, GIF, WebP), one self-contained web page to orbit in a browser
+  (``stylize3d_core/export/web_page.py``; it plays the export's camera path),
+  camera paths as stylize3d JSON and Open3D trajectory.
 
 :class:`ApplicationsController` is a controller like those of :mod:`app.viewer.actions`:
 its methods run on the GUI main thread, the work (the library's functions below)
@@ -19,7 +21,7 @@ on the compute worker; exports go through
 :meth:`~app.viewer.actions.ExportController.run_export` (progress, Cancel, atomic
 writes by the library's writers). The work functions (:func:`layers_from_file`,
 :func:`layers_by_grabcut`, :func:`merged_photo`, :func:`export_point_file`,
-:func:`export_video`, ...) take the session and need no window.
+:func:`export_web_page`, :func:`export_video`, ...) take the session and need no window.
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ import open3d.visualization.gui as gui
 from stylize3d_core.errors import InputError
 from stylize3d_core.export.camera_paths import write_camera_path
 from stylize3d_core.export.frames import output_kind, write_frames
-from stylize3d_core.export.run import export_frames, export_points
+from stylize3d_core.export.run import export_frames, export_page, export_points
 from stylize3d_core.export.settings import ExportSettings
 from stylize3d_core.geometry.camera import Cameras
 from stylize3d_core.render.plain import frame_size
@@ -52,7 +54,7 @@ if TYPE_CHECKING:
 
 (MENU_VIEWS, MENU_CARD, MENU_CARD_CROSS, MENU_MASK_FILE, MENU_GRABCUT, MENU_PERSON, MENU_FG_STRENGTH,
  MENU_MASK_CLEAR, MENU_PLY, MENU_SPLAT, MENU_SBS, MENU_ANAGLYPH, MENU_LOOP, MENU_PATH_JSON, MENU_PATH_OPEN3D,
- MENU_PATH_LOAD) = range(301, 317)
+ MENU_PATH_LOAD, MENU_HTML) = range(301, 318)
 """Menu ids of the Applications menu: clear of the recent photos' and styles' (100 + i, 200 + i, panel.py)."""
 
 CARD_SPECS = {False: "stereo:card", True: "stereo:card:cross"}
@@ -64,6 +66,7 @@ VIEWS_FILTERS = ((".json", "Views file or Open3D trajectory views (JSON)"), ("",
 MASK_FILTERS = ((".png .jpg .jpeg .webp .tif .tiff .bmp", "Mask images (PNG, ...)"), ("", "All files"))
 CARD_FILTERS = ((".jpg .jpeg .png .webp .tif .tiff", "Scanned stereo cards"), ("", "All files"))
 PLY_FILTERS = ((".ply", "PLY"), ("", "All files"))
+HTML_FILTERS = ((".html .htm", "Web page (HTML)"), ("", "All files"))
 
 
 def build_applications_menu() -> gui.Menu:
@@ -81,6 +84,7 @@ def build_applications_menu() -> gui.Menu:
     m.add_separator()
     m.add_item("Export point cloud (PLY, baked colours)...", MENU_PLY)
     m.add_item("Export Gaussian splats (.ply)...", MENU_SPLAT)
+    m.add_item("Export web page (HTML, orbit in a browser)...", MENU_HTML)
     m.add_item("Export side-by-side stereo video...", MENU_SBS)
     m.add_item("Export red-cyan anaglyph video...", MENU_ANAGLYPH)
     m.add_item("Export boomerang loop (MP4, GIF, WebP)...", MENU_LOOP)
@@ -228,6 +232,28 @@ def export_point_file(session: "ViewerSession", path: str, kind: str, stylized: 
                          stylized=use_model)
 
 
+def page_destination(path: str) -> str:
+    """``path`` with ``.html`` appended when it has no suffix (another suffix than .html/.htm is an error)."""
+    p = Path(path)
+    if p.suffix == "":
+        return path + ".html"
+    if p.suffix.lower() not in (".html", ".htm"):
+        raise InputError(path, "a web page must end in .html or .htm")
+    return path
+
+
+def export_web_page(session: "ViewerSession", path: str, cameras: Cameras, fps: float, stylized: bool,
+                    between: Callable[[], object] = lambda: None) -> Path:
+    """Write the open photo as one self-contained web page (the library's
+    :func:`~stylize3d_core.export.run.export_page`): colours baked from the session's stylized views when
+    ``stylized``, orbiting within the photo's camera range, ``cameras`` played by its Play button."""
+    photo = _need_photo(session)
+    use_model = bool(stylized and session.can_stylize)
+    title = Path(session.info.path).stem if session.info.path else "3D photo"
+    return export_page(page_destination(path), ExportSettings(export="html"), photo,
+                       SessionRenderer(session, use_model, between), use_model, cameras, fps, title=title)
+
+
 def export_video(session: "ViewerSession", path: str, settings: ExportSettings, cameras: Cameras,
                  size: Tuple[int, int], fps: float, stylized: bool, progress=None,
                  between: Callable[[], object] = lambda: None) -> Path:
@@ -267,7 +293,7 @@ class ApplicationsController(Controller):
             MENU_CARD_CROSS: lambda: self.on_open_card(True), MENU_MASK_FILE: self.on_mask_file,
             MENU_GRABCUT: self.on_grabcut, MENU_PERSON: self.on_person, MENU_FG_STRENGTH: self.on_foreground_strength,
             MENU_MASK_CLEAR: self.on_clear_mask, MENU_PLY: lambda: self.on_export("ply"),
-            MENU_SPLAT: lambda: self.on_export("splat"), MENU_SBS: lambda: self.on_export("sbs"),
+            MENU_SPLAT: lambda: self.on_export("splat"), MENU_HTML: lambda: self.on_export("html"), MENU_SBS: lambda: self.on_export("sbs"),
             MENU_ANAGLYPH: lambda: self.on_export("anaglyph"), MENU_LOOP: lambda: self.on_export("loop"),
             MENU_PATH_JSON: lambda: self.on_save_path("stylize3d"), MENU_PATH_OPEN3D: lambda: self.on_save_path("open3d"),
             MENU_PATH_LOAD: self.on_load_path,
@@ -515,10 +541,11 @@ class ApplicationsController(Controller):
         if kind in ("sbs", "anaglyph"):
             self._stereo_dialog(kind)
             return
-        names = {"ply": "stylized_points.ply", "splat": "stylized_splats.ply", "loop": "stylized_loop.mp4"}
+        names = {"ply": "stylized_points.ply", "splat": "stylized_splats.ply", "loop": "stylized_loop.mp4",
+                 "html": "stylized_3d_photo.html"}
         titles = {"ply": "Export point cloud (PLY)", "splat": "Export Gaussian splats (.ply)",
-                  "loop": "Export boomerang loop (.mp4, .gif or .webp)"}
-        filters = PLY_FILTERS if kind in ("ply", "splat") else ()
+                  "loop": "Export boomerang loop (.mp4, .gif or .webp)", "html": "Export web page (.html)"}
+        filters = PLY_FILTERS if kind in ("ply", "splat") else HTML_FILTERS if kind == "html" else ()
         w.file_dialog(gui.FileDialog.SAVE, titles[kind], filters, lambda path: self.start_export(kind, path),
                       names[kind])
 
@@ -549,15 +576,16 @@ class ApplicationsController(Controller):
                      fields, ("Choose file...", ok))
 
     def export_settings(self, kind: str) -> ExportSettings:
-        """The library's export settings for ``kind`` (ply, splat, sbs, anaglyph, loop) from the dialogs' choices."""
+        """The library's export settings for ``kind`` (ply, splat, html, sbs, anaglyph, loop) from the dialogs'
+        choices."""
         if kind == "loop":
             return ExportSettings(export="video", loop=True)
         if kind in ("sbs", "anaglyph"):
             return ExportSettings(export=kind, stereo_layout=self.stereo_layout, eye_distance=self.eye_distance,
                                   loop=self.stereo_loop)
-        if kind in ("ply", "splat"):
+        if kind in ("ply", "splat", "html"):
             return ExportSettings(export=kind)
-        raise InputError("export", f"unknown export {kind!r}: ply, splat, sbs, anaglyph or loop")
+        raise InputError("export", f"unknown export {kind!r}: ply, splat, html, sbs, anaglyph or loop")
 
     def start_export(self, kind: str, path: str) -> str:
         """Export ``kind`` to ``path`` on the worker (progress, Cancel); returns the destination."""
@@ -579,8 +607,19 @@ class ApplicationsController(Controller):
 
             what = "baked point cloud" if kind == "ply" else "Gaussian splats"
             return w.exports.run_export(dest, f"Writing the {what} to {dest} ...", 1, points)
-        dest = video_destination(path)
         cams = w.paths.export_cameras()
+        if kind == "html":
+            dest, fps = page_destination(path), s.export.fps
+
+            def page(progress, between) -> Path:
+                def step() -> None:
+                    progress(0, 1)
+                    between()
+
+                return export_web_page(session, dest, cams, fps, stylized, step)
+
+            return w.exports.run_export(dest, f"Writing the web page to {dest} ...", 1, page)
+        dest = video_destination(path)
         size, fps = frame_size(s.photo_info.size, s.export.size), s.export.fps
         n = 2 * len(cams) - 2 if settings.loop and len(cams) > 1 else len(cams)
 

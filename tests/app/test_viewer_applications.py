@@ -31,6 +31,7 @@ from stylize3d_core.errors import InputError
 from stylize3d_core.eval.multiview import procedural_views
 from stylize3d_core.export.camera_paths import camera_path_format, read_camera_path
 from stylize3d_core.export.splat import read_splat_ply, read_vertex_properties
+from stylize3d_core.export.web_page import read_page
 from stylize3d_core.multiview import save_views
 from stylize3d_core.pipeline import PhotoSpec
 from stylize3d_core.render.plain import frame_size
@@ -145,7 +146,7 @@ def _centre_mask(size) -> np.ndarray:
 # -- the menu and small pure helpers ------------------------------------------------------------
 def test_every_menu_item_has_a_callback(window):
     callbacks = window.applications.menu_callbacks()
-    assert sorted(callbacks) == list(range(A.MENU_VIEWS, A.MENU_PATH_LOAD + 1))
+    assert sorted(callbacks) == list(range(A.MENU_VIEWS, A.MENU_HTML + 1))
 
 
 def test_rectangle_fractions_become_pixels():
@@ -164,6 +165,9 @@ def test_destinations():
     assert A.video_destination("loop") == "loop.mp4" and A.video_destination("x.webp") == "x.webp"
     with pytest.raises(InputError, match=r"\.mp4, \.gif, \.webp"):
         A.video_destination("loop.avi")
+    assert A.page_destination("photo") == "photo.html" and A.page_destination("p.HTM") == "p.HTM"
+    with pytest.raises(InputError, match="must end in .html or .htm"):
+        A.page_destination("photo.ply")
 
 
 def test_export_settings_follow_the_dialog_choices(window):
@@ -290,6 +294,21 @@ def test_point_exports(window, tmp_path):
     assert window.stats["last_export"].endswith("splats.ply")
     with pytest.raises(InputError, match="must end in .ply"):
         c.start_export("ply", str(tmp_path / "cloud.obj"))
+
+
+def test_web_page_export(window, tmp_path):
+    c, photo = window.applications, window.session.photo
+    dest = Path(c.start_export("html", str(tmp_path / "page")))
+    assert not window.errors, window.errors
+    assert dest.name == "page.html"
+    meta, q, rgb = read_page(dest)
+    assert meta["count"] == len(q) == len(rgb) == len(photo.points)
+    assert len(meta["trajectory"]["cam_to_world"]) == len(window.paths.export_cameras())
+    assert meta["title"] == Path(window.session.info.path).stem
+    before = dest.read_bytes()
+    with pytest.raises(InputError, match="must end in .html or .htm"):
+        c.start_export("html", str(tmp_path / "page.ply"))
+    assert dest.read_bytes() == before
 
 
 def test_stereo_and_loop_videos(window, tmp_path):
