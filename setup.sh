@@ -8,7 +8,7 @@
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")"
 
-# chromium and chromium-driver: the browser test of the web-page export (tests/export/test_web_page_browser.py).
+# chromium and chromium-driver: the browser test of the web-page export (tests/export/test_web_page.py).
 DEBIAN_PACKAGES=(libusb-1.0-0 libvulkan1 mesa-vulkan-drivers libgl1 libegl1 libgomp1 xvfb xauth chromium chromium-driver)
 TORCH_REQUIREMENT="torch==2.13.0"
 
