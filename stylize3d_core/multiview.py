@@ -38,6 +38,7 @@ from .errors import InputError, PathLike
 from .export.camera_paths import read_camera_path
 from .geometry.camera import check_fov
 from .io.images import load_image
+from .io.json_files import read_json_file
 from .scene.multiview import MergedViews, View, merge_views
 from .scene.photo3d import Photo3DSettings
 
@@ -73,12 +74,7 @@ def load_views(path: PathLike, *, max_size: int = 1024, log=lambda _m: None) -> 
     from .depth.sources import parse_depth_spec  # the depth package loads onnxruntime
 
     src = Path(path)
-    try:
-        doc = json.loads(src.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(src, "views file not found") from None
-    except (OSError, UnicodeDecodeError, ValueError) as e:
-        raise InputError(src, f"not a valid JSON views file: {e}") from None
+    doc = read_json_file(src, "views file")
     if not isinstance(doc, dict) or doc.get("format") != FORMAT_TAG:
         raise InputError(src, f"not a stylize3d views file (expected \"format\": \"{FORMAT_TAG}\")")
     if doc.get("version") != FORMAT_VERSION:

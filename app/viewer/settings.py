@@ -125,8 +125,9 @@ def load_settings(path: Optional[Path] = None) -> LoadedSettings:
         return LoadedSettings(ViewerSettings(), f"{p}: could not read the settings ({e}); starting without history")
     try:
         return LoadedSettings(parse_settings(json.loads(text)), None)
-    except ValueError as e:  # json.JSONDecodeError is a ValueError
-        return LoadedSettings(ViewerSettings(), f"{p}: settings ignored ({e}); they are rewritten at the next save")
+    except (ValueError, RecursionError) as e:  # json.JSONDecodeError is a ValueError; too deep a nesting recurses
+        why = "nested too deeply" if isinstance(e, RecursionError) else e
+        return LoadedSettings(ViewerSettings(), f"{p}: settings ignored ({why}); they are rewritten at the next save")
 
 
 def save_settings(settings: ViewerSettings, path: Optional[Path] = None) -> Path:

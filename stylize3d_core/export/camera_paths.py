@@ -8,12 +8,12 @@ so ``--camera-path`` takes either. The readers and writers themselves are in
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Literal, Tuple
 
 from ..errors import InputError, PathLike
 from ..geometry.camera import Cameras
+from ..io.json_files import read_json_file
 from ..io.camera_path import (MAX_FRAMES, CameraPath, load_camera_path, load_open3d_trajectory, save_camera_path,
                               save_open3d_trajectory)
 
@@ -25,8 +25,8 @@ def camera_path_format(path: PathLike) -> PathFormat:
     """Which format the JSON file ``path`` holds ("open3d" or "stylize3d"; unreadable files are "stylize3d",
     whose reader names the problem)."""
     try:
-        doc = json.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError):
+        doc = read_json_file(path, "camera path")
+    except InputError:
         return "stylize3d"
     return "open3d" if isinstance(doc, dict) and doc.get("class_name") == OPEN3D_CLASS else "stylize3d"
 

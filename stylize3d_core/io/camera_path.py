@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import json
 import math
-import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, List, Optional, Tuple
@@ -44,6 +43,7 @@ import torch
 from ..errors import ExportError, InputError, PathLike
 from ..geometry.camera import MAX_FOV_DEG, MIN_FOV_DEG, Cameras, focal_from_fov
 from .atomic import write_atomically
+from .json_files import read_json_file
 
 FORMAT_TAG = "stylize3d-camera-path"
 FORMAT_VERSION = 1
@@ -177,83 +177,6 @@ def save_camera_path(
 
 MAX_FRAMES = 10_000
 """Most frames a camera-path file may hold by default (5.5 min at 30 fps); ``max_frames`` raises it."""
-MAX_FILE_BYTES = 32 * 1024 * 1024
-"""Largest camera-path file read (a 10,000-frame path written by :func:`save_camera_path` is ~6 MB)."""
-MAX_JSON_DEPTH = 32
-"""Deepest nesting of arrays and objects accepted (the schema needs 4)."""
-_MAYBE_HUGE = re.compile(rb"[0-9]{309}|[eE][+-]?[0-9]{3}")
-_BRACKET_STEP = np.zeros(256, np.int8)
-_BRACKET_STEP[[ord("["), ord("{")]] = 1
-_BRACKET_STEP[[ord("]"), ord("}")]] = -1
-_STRING = re.compile(rb'"(?:[^"\\]|\\.)*"', re.DOTALL)
-
-
-def _reject_constant(name: str) -> float:
-    raise ValueError(f"non-finite number {name}")
-
-
-def _parse_int(text: str) -> int:
-    value = int(text)
-    try:
-        float(value)
-    except OverflowError:
-        raise ValueError(f"the integer {text[:20]}... ({len(text)} digits) does not fit a floating-point number")
-    return value
-
-
-def _parse_float(text: str) -> float:
-    value = float(text)
-    if not math.isfinite(value):
-        raise ValueError(f"the number {text[:40]} does not fit a floating-point number")
-    return value
-
-
-def _json_depth(data: bytes) -> int:
-    """Deepest bracket nesting of JSON text (brackets inside strings do not count)."""
-    bare = np.frombuffer(_STRING.sub(b'""', data) if b'"' in data else data, dtype=np.uint8)
-    step = _BRACKET_STEP[bare]  # +1 opening, -1 closing, 0 other bytes
-    step = step[step != 0]
-    return int(np.cumsum(step, dtype=np.int32).max(initial=0))
-
-
-def read_json_file(path: PathLike, what: str, *, max_bytes: int = MAX_FILE_BYTES,
-                   max_depth: int = MAX_JSON_DEPTH) -> Any:
-    """Parse a user's JSON file with bounded size and nesting; numbers must fit a float64.
-
-    Raises:
-        InputError: naming the file: missing, unreadable, too large, nested too
-            deeply, not JSON, or with NaN / Infinity / a number too large for a float.
-    """
-    src = Path(path)
-    try:
-        size = src.stat().st_size
-        if size > max_bytes:
-            raise InputError(src, f"the file is {size:,} bytes, more than the {max_bytes:,} a {what} may have")
-        data = src.read_bytes()
-    except FileNotFoundError:
-        raise InputError(src, "file not found") from None
-    except OSError as e:
-        raise InputError(src, f"cannot read the file: {e.strerror or e}") from None
-    if len(data) > max_bytes:  # grew while reading, or not a regular file
-        raise InputError(src, f"the file is more than the {max_bytes:,} bytes a {what} may have")
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as e:
-        raise InputError(src, f"cannot read the file: not UTF-8 text ({e})") from None
-    depth = _json_depth(data)
-    if depth > max_depth:
-        raise InputError(src, f"not a valid JSON {what}: nested {depth} levels deep (at most {max_depth})")
-    # The number hooks cost a Python call per number: use them only where a number may not fit a float
-    # (a run of 309+ digits, or an exponent of 3+ digits).
-    hooks = {"parse_int": _parse_int, "parse_float": _parse_float} if _MAYBE_HUGE.search(data) else {}
-    try:
-        return json.loads(text, parse_constant=_reject_constant, **hooks)
-    except RecursionError:  # not reached below max_depth; kept as a guard
-        raise InputError(src, f"not a valid JSON {what}: nested too deeply") from None
-    except ValueError as e:  # JSONDecodeError is a ValueError; so are NaN/Infinity and oversized numbers
-        raise InputError(src, f"not a valid JSON {what}: {e}") from None
-
-
 def _check_frame_count(n: int, fps: Optional[float], max_frames: int, source: Path) -> None:
     if n > max_frames:
         length = f" ({n / fps / 60:.1f} min at {fps:g} fps)" if fps else ""

@@ -23,6 +23,7 @@ from ..errors import ExportError, InputError, PathLike
 from ..geometry.keyframes import KeyframePath, keyframes_from_cameras, keyframes_to_cameras
 from .atomic import atomic_path
 from .camera_path import CONVENTIONS, FORMAT_TAG, FORMAT_VERSION, load_camera_path
+from .json_files import read_json_file
 
 KEYFRAMES_KEY = "keyframes"
 DEFAULT_DURATION_S = 1.0
@@ -64,7 +65,7 @@ def load_keyframes(path: PathLike) -> Tuple[KeyframePath, float]:
     """
     src = Path(path)
     cp = load_camera_path(src)  # validates the file, the poses and the FOVs
-    doc = json.loads(src.read_text(encoding="utf-8"))
+    doc = read_json_file(src, "keyframe file")
     block = doc.get(KEYFRAMES_KEY)
     n = len(cp.cameras)
     if block is None:

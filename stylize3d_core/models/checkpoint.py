@@ -91,6 +91,8 @@ def config_from_json(text: str, source: PathLike, version: str = VERSION) -> Mod
             decoder=dec, detail_channels=int(d.get("detail_channels", 0)),
             detail_transfer=bool(d.get("detail_transfer", False)), style_prior=bool(d.get("style_prior", False)),
         )
+    except RecursionError:
+        raise InputError(source, "the checkpoint's model configuration is unreadable (nested too deeply)") from None
     except (ValueError, KeyError, TypeError, AttributeError) as e:
         raise InputError(source, f"the checkpoint's model configuration is unreadable ({e})") from None
 
@@ -163,6 +165,6 @@ def load_checkpoint(path: PathLike) -> Checkpoint:
     try:
         stage = int(meta.get("stage", ""))
         info = json.loads(meta.get("info", "{}"))
-    except ValueError:
+    except (ValueError, RecursionError):
         raise InputError(p, "the checkpoint's stage or info metadata is unreadable") from None
     return Checkpoint(model, stage, info)

@@ -6,7 +6,8 @@ import pytest
 
 import stylize3d_core.io.camera_path as cp
 from stylize3d_core.errors import InputError
-from stylize3d_core.io.camera_path import MAX_FRAMES, load_camera_path, load_open3d_trajectory, read_json_file
+from stylize3d_core.io.camera_path import MAX_FRAMES, load_camera_path, load_open3d_trajectory
+from stylize3d_core.io.json_files import MAX_JSON_DEPTH, read_json_file
 
 EYE = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]
 
@@ -44,7 +45,7 @@ def test_brackets_inside_strings_do_not_count(write):
 
 
 def test_nesting_up_to_the_limit_is_parsed(write):
-    text = "[" * cp.MAX_JSON_DEPTH + "]" * cp.MAX_JSON_DEPTH
+    text = "[" * MAX_JSON_DEPTH + "]" * MAX_JSON_DEPTH
     assert read_json_file(write(text), "thing") == eval(text)
 
 
@@ -92,17 +93,16 @@ def test_the_frame_limit_can_be_raised_and_lowered(write):
         load_camera_path(write(json.dumps(_doc(3)), "b.json"), max_frames=2)
 
 
-def test_an_oversized_file_is_refused_before_it_is_read(write, monkeypatch):
-    monkeypatch.setattr(cp, "MAX_FILE_BYTES", 1000)
+def test_an_oversized_file_is_refused_before_it_is_read(write):
     with pytest.raises(InputError, match="more than the 1,000 a camera path may have"):
-        read_json_file(write(" " * 1001), "camera path", max_bytes=cp.MAX_FILE_BYTES)
+        read_json_file(write(" " * 1001), "camera path", max_bytes=1000)
 
 
 @pytest.mark.parametrize("data, words", [
     (b"\xff\xfe{}", "not UTF-8"),
     (b'{"format": NaN}', "non-finite number NaN"),
     (b"", "not a valid JSON"),
-    (b"{" * 10, "nested 10 levels deep" if cp.MAX_JSON_DEPTH < 10 else "not a valid JSON"),
+    (b"{" * 10, "nested 10 levels deep" if MAX_JSON_DEPTH < 10 else "not a valid JSON"),
 ])
 def test_other_broken_files(write, data, words):
     with pytest.raises(InputError, match=words):
