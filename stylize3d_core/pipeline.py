@@ -274,7 +274,7 @@ def warm_up(wait: bool = False) -> float:
     ``wait``: return when all of it is done (the benchmarks time a photo after it). Returns the seconds
     it took."""
     from .points.sampling import wait_for_fps_process
-    from .render.rasterize_fast import wait_warm, warm_up_async
+    from .render.rasterize import wait_warm, warm_up_async
 
     t0 = time.perf_counter()
     start_fps_process()
@@ -315,7 +315,7 @@ def prefetch_style(style_rgb: np.ndarray, encoder=None) -> Future:
     includes the autocast state, which is per thread: under a caller's autocast the features are simply
     computed again. ``result()`` re-raises the worker's error.
     """
-    from .render.rasterize_fast import warm_up_async
+    from .render.rasterize import warm_up_async
 
     warm_up_async()  # the rasterizer's compiled kernels load meanwhile too
     pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="style-cnn")

@@ -54,7 +54,7 @@ from .models.scene_geometry import SceneGeometry, prepare_geometry
 from .models.stylize3d import Stylize3DModel
 from .points.sampling import start_fps_process
 from .render.plain import StratifiedOrder, preview_point_count
-from .render.rasterize_fast import warm_up_async
+from .render.rasterize import RASTER_BACKENDS, warm_up_async
 from .render.rasterizer import columns
 from .scene.layer_images import hidden_layer_image, layer_colours
 from .scene.photo3d import Photo3D
@@ -98,6 +98,8 @@ class StylizeSettings:
             "onnxruntime" or "torch". ONNX Runtime gives the same frames within ~2e-6 and decodes a 768x512
             frame ~1.3x faster on this AVX2 CPU, a 256-px preview ~1.1x slower
             (:mod:`~stylize3d_core.models.decoder_onnx`). bfloat16 decoding always runs in torch.
+        rasterizer: the rasterizer's backend, "auto" (default: its compiled inference path where it applies)
+            or "tensor" (:attr:`~stylize3d_core.render.rasterize.RasterSettings.backend`).
         border_margin: pixels rendered beyond each side of a full frame and cut off (default 8; 0: none).
             The U-Net's zero padding makes its outermost ~8 pixels differ from what it decodes inside a
             frame (up to ~20 levels at the edge: a visible coloured rim); with the margin, the frame's edge
@@ -124,6 +126,7 @@ class StylizeSettings:
     match_palette: bool = True
     bfloat16: Optional[bool] = None
     decoder_runtime: str = "auto"
+    rasterizer: str = "auto"
     border_margin: int = 8
     preview_border_margin: int = 8
     prior_size: int = 512
@@ -145,6 +148,8 @@ class StylizeSettings:
             raise InputError("match_palette", f"must be True or False, got {self.match_palette!r}")
         if self.bfloat16 is not None and not isinstance(self.bfloat16, bool):
             raise InputError("bfloat16", f"must be None, True or False, got {self.bfloat16!r}")
+        if self.rasterizer not in RASTER_BACKENDS:
+            raise InputError("rasterizer", f"must be one of {', '.join(RASTER_BACKENDS)}, got {self.rasterizer!r}")
         if self.decoder_runtime not in DECODER_RUNTIMES:
             raise InputError("decoder_runtime", f"must be one of {', '.join(DECODER_RUNTIMES)}, "
                                                 f"got {self.decoder_runtime!r}")
@@ -566,7 +571,7 @@ class Stylized3DPhoto:
             rgb, _ = self.model.render_view(self._dense[:keep], self._xyz[:keep], camera, height + 2 * m,
                                             width + 2 * m, supersample=ss, should_stop=should_stop,
                                             bfloat16=st.decode_bfloat16, features_finite=True, runtime=runtime,
-                                            **split)
+                                            raster_backend=st.rasterizer, **split)
             if m:
                 rgb = rgb[..., m : m + height, m : m + width]
             return torch.nan_to_num(rgb.float(), nan=0.0).clamp_(0.0, 1.0)  # float32 after a bfloat16 autocast

@@ -47,13 +47,13 @@ def test_warm_up_waits_for_the_fps_worker_and_the_kernels():
     loaded; a second call finds everything running and starts nothing new."""
     from stylize3d_core.pipeline import warm_up
     from stylize3d_core.points import sampling
-    from stylize3d_core.render import rasterize_fast
+    from stylize3d_core.render import rasterize
 
     first = warm_up(wait=True)
     assert first >= 0.0
     if sampling._WORKER.enabled:
         assert sampling._WORKER._ready and sampling._WORKER._proc.poll() is None
-    assert rasterize_fast._WARM is not None and not rasterize_fast._WARM.is_alive()
-    proc, thread = sampling._WORKER._proc, rasterize_fast._WARM
+    assert rasterize._WARM is not None and not rasterize._WARM.is_alive()
+    proc, thread = sampling._WORKER._proc, rasterize._WARM
     warm_up(wait=True)
-    assert sampling._WORKER._proc is proc and rasterize_fast._WARM is thread  # the same process, no new warm-up
+    assert sampling._WORKER._proc is proc and rasterize._WARM is thread  # the same process, no new warm-up

@@ -42,7 +42,6 @@ import torch
 
 from ..eval.timing import median_time
 from ..models.decoder import native_bfloat16
-from ..render import rasterize_fast
 from ..threads import torch_threads
 from .report import pareto_front, scatter_plot, write_table
 
@@ -179,7 +178,8 @@ class SpeedScene:
 
     @contextlib.contextmanager
     def stylized(self, supersample: int = 1, per_pixel: float = 3.0, decode_scale: int = 1,
-                 final_per_pixel: Optional[float] = None, bfloat16: bool = False, runtime: str = "auto"):
+                 final_per_pixel: Optional[float] = None, bfloat16: bool = False, runtime: str = "auto",
+                 rasterizer: str = "auto"):
         """The one ``Stylized3DPhoto`` of the scene, with these settings while the context lasts (its
         settings are read at render time, so the cached geometry and features are shared by every variant)."""
         from ..stylize import Stylized3DPhoto
@@ -191,7 +191,8 @@ class SpeedScene:
         before = s.settings
         s.settings = replace(before, supersample=supersample, preview_points_per_pixel=per_pixel,
                              decode_scale=decode_scale, preview_decode_scale=decode_scale,
-                             final_points_per_pixel=final_per_pixel, bfloat16=bfloat16, decoder_runtime=runtime)
+                             final_points_per_pixel=final_per_pixel, bfloat16=bfloat16, decoder_runtime=runtime,
+                             rasterizer=rasterizer)
         try:
             yield s
         finally:
@@ -242,19 +243,16 @@ class VariantRun:
         self._stack = contextlib.ExitStack()
         self.s = self._stack.enter_context(self.scene.stylized(v.supersample, v.preview_points_per_pixel or 3.0,
                                                                v.decode_scale, v.final_points_per_pixel,
-                                                               v.bf16_decoder, v.runtime))
+                                                               v.bf16_decoder, v.runtime,
+                                                               "tensor" if v.tensor_rasterizer else "auto"))
         self._stack.enter_context(torch_threads(v.threads))  # restored when the stack closes
         self._config = self.s.model.decoder.config
         if v.channels_first:
             self.s.model.decoder.config = replace(self._config, channels_last=False)
             self.s.model.decoder.to(memory_format=torch.contiguous_format)
-        self._compiled = rasterize_fast.ENABLED
-        if v.tensor_rasterizer:
-            rasterize_fast.ENABLED = False
         return self
 
     def __exit__(self, *exc) -> None:
-        rasterize_fast.ENABLED = self._compiled
         decoder, config = self.s.model.decoder, self._config
         if self.v.channels_first:
             decoder.config = config

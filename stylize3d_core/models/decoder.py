@@ -528,9 +528,12 @@ class UNetDecoder(nn.Module):
         ``bfloat16``: decode under a CPU bfloat16 autocast (inference; see the module docstring);
         the result is float32 either way.
 
-        ``runtime``: an :class:`~stylize3d_core.models.decoder_onnx.OnnxUNet` of this decoder (inference, float32):
-        it runs the U-Net (the same outputs up to float rounding, faster on CPUs without native bfloat16);
-        everything around it (padding, crop, heads, colour transform) is this method's."""
+        ``runtime``: the caller's choice of another runtime for the U-Net (inference, float32), any object
+        whose ``run_or_none(x, should_stop)`` takes the assembled NHWC input and returns (``y``,
+        ``coefficients`` or None), or None where it could not run (this frame then decodes in torch); the
+        caller makes it (``models/decoder_onnx.onnx_unet``: ONNX Runtime, the same outputs up to float
+        rounding, faster on CPUs without native bfloat16). Everything around it (padding, crop, heads,
+        colour transform) is this method's."""
         if bfloat16 and torch.is_grad_enabled():
             raise InputError("bfloat16", "bfloat16 decoding is for inference (run under torch.inference_mode())")
         if runtime is not None and (bfloat16 or torch.is_grad_enabled()):
@@ -550,13 +553,7 @@ class UNetDecoder(nn.Module):
         unet = None
         if runtime is not None:
             x = _assemble(features, mask, 2**self.config.levels, True, should_stop)  # NHWC, as the graph takes it
-            try:
-                unet = runtime.run(x, should_stop)
-            except RenderInterrupted:
-                raise
-            except Exception as exc:  # noqa: BLE001 (onnxruntime's own errors): this frame and the next in torch
-                from .decoder_onnx import disable
-                disable(exc)
+            unet = runtime.run_or_none(x, should_stop)  # None: it failed, and this frame decodes in torch
         if unet is not None:
             y, coefficients = unet
             padded = tuple(x.shape[-2:])

@@ -227,6 +227,17 @@ class OnnxUNet:
             raise run.result
         return self._outputs(run.result)
 
+    def run_or_none(self, x: torch.Tensor, should_stop: StopCheck = None):
+        """:meth:`run`, or None where ONNX Runtime fails (an error that is not a stop): :func:`disable` warns
+        once and the caller decodes this frame in torch (``UNetDecoder.forward``)."""
+        try:
+            return self.run(x, should_stop)
+        except (RenderInterrupted, InputError):
+            raise
+        except Exception as exc:  # noqa: BLE001 (onnxruntime's own errors)
+            disable(exc)
+            return None
+
     def _outputs(self, outs) -> Tuple[torch.Tensor, Optional[torch.Tensor]]:
         y = torch.from_numpy(outs[0])
         return y, (torch.from_numpy(outs[1]) if self.has_coefficients else None)

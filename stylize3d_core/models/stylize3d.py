@@ -217,6 +217,7 @@ class Stylize3DModel(nn.Module):
         self, dense: torch.Tensor, xyz: torch.Tensor, camera: Cameras, height: int, width: int,
         supersample: int = 1, should_stop: Optional[Callable[[], bool]] = None, *,
         decode_scale: int = 1, bfloat16: bool = False, features_finite: bool = False, runtime=None,
+        raster_backend: str = "auto",
     ) -> Tuple[torch.Tensor, Fragments]:
         """Decode one view: (3, H, W) RGB in (0, 1) and the rasterizer's fragments.
 
@@ -238,10 +239,13 @@ class Stylize3DModel(nn.Module):
 
         ``runtime``: the decoder's U-Net in ONNX Runtime
         (:func:`~stylize3d_core.models.decoder_onnx.onnx_unet`; float32 inference), or None: torch.
+
+        ``raster_backend``: :attr:`~stylize3d_core.render.rasterize.RasterSettings.backend`.
         """
         if isinstance(decode_scale, bool) or not isinstance(decode_scale, int) or not 1 <= decode_scale <= 8:
             raise InputError("decode_scale", f"must be an integer from 1 to 8, got {decode_scale!r}")
-        settings = RasterSettings(height=int(height), width=int(width), supersample=supersample)
+        settings = RasterSettings(height=int(height), width=int(width), supersample=supersample,
+                                  backend=raster_backend)
         if decode_scale > 1:
             return self._render_split(dense, xyz, camera, settings, decode_scale, should_stop, bfloat16,
                                       features_finite, runtime)

@@ -80,6 +80,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import threading
 from dataclasses import dataclass
 from typing import Callable, Dict, List, NamedTuple, Optional
 
@@ -94,6 +95,10 @@ from . import rasterize_fast
 
 MAX_IMAGE_SIDE = 16384
 """Largest image height or width accepted (before supersampling)."""
+
+
+RASTER_BACKENDS = ("auto", "tensor")
+"""The values of :attr:`RasterSettings.backend`."""
 
 
 @dataclass(frozen=True)
@@ -141,6 +146,10 @@ class RasterSettings:
             coverage; bilinear splats of a magnified surface do not, and the surface behind would
             show through it); supersampling (2) ignores it: its sub-pixel z-buffer anti-aliases
             silhouettes, and the sub-pixel splats of grown points do not tile the sub-pixels.
+        backend: "auto" (default): the compiled inference path (:mod:`.rasterize_fast`) where it applies
+            and Numba imports, the tensor path otherwise; "tensor": always the tensor path (the reference,
+            and what ``bench speed`` compares the compiled path with). Both give the same fragments up to
+            float rounding.
     """
 
     height: int
@@ -151,6 +160,7 @@ class RasterSettings:
     near_clip: float = 1e-3
     soft_edges: bool = False
     blend_coverage: bool = False
+    backend: str = "auto"
 
     def __post_init__(self) -> None:
         for name in ("height", "width", "supersample"):
@@ -164,6 +174,8 @@ class RasterSettings:
         check_range(self.depth_tolerance, "depth_tolerance", 0.0, 1.0)
         check_range(self.hole_weight_threshold, "hole_weight_threshold", 0.0, math.inf, inclusive=False)
         check_range(self.near_clip, "near_clip", 0.0, math.inf, inclusive=False)
+        if self.backend not in RASTER_BACKENDS:
+            raise InputError("backend", f"must be one of {', '.join(RASTER_BACKENDS)}, got {self.backend!r}")
 
 
 class Fragments(NamedTuple):
@@ -750,3 +762,37 @@ def _accumulate(pix_e: torch.Tensor, pt_e: torch.Tensor, w_e: torch.Tensor, tabl
 def _bag_sum_bags(bags, table: torch.Tensor) -> torch.Tensor:
     index, offsets, weights = bags
     return _bag_sum(index, table, offsets, weights)
+
+
+_WARM: Optional[threading.Thread] = None
+_WARM_LOCK = threading.Lock()
+
+
+def warm_up_async() -> None:
+    """Import Numba and load (or, the first time on a machine, compile) the compiled path's kernels
+    (:mod:`.rasterize_fast`) in a daemon thread, once per process, so the first frame does not wait for
+    them; the stages that call this (the style prefetch, ``Stylized3DPhoto``) run while the photo's depth,
+    LDI or geometry are being built."""
+    global _WARM
+    with _WARM_LOCK:
+        if _WARM is None:
+            _WARM = threading.Thread(target=_warm_up, name="stylize3d-raster-warm-up", daemon=True)
+            _WARM.start()
+
+
+def wait_warm(timeout: Optional[float] = None) -> None:
+    """Start the warm-up if needed (:func:`warm_up_async`) and wait until the kernels are loaded."""
+    warm_up_async()
+    _WARM.join(timeout)
+
+
+def _warm_up() -> None:
+    try:
+        if not rasterize_fast.available():
+            return
+        K = torch.tensor([[2.0, 0.0, 1.0], [0.0, 2.0, 1.0], [0.0, 0.0, 1.0]])
+        with torch.inference_mode():  # one point: each kernel runs once with the real argument types
+            rasterize_fast.rasterize_fast(torch.tensor([[0.0, 0.0, 1.0]]), torch.ones(1, 1), K,
+                                          RasterSettings(2, 2))
+    except Exception:  # noqa: BLE001 (a failed warm-up is only a slower first frame; the render reports)
+        return

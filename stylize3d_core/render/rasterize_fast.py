@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import functools
 import math
-import threading
 import warnings
 from typing import Callable, Optional
 
@@ -57,41 +56,6 @@ def _kernels():
     return _threads.compiled(__package__ + "._raster_kernels")
 
 
-_WARM: Optional[threading.Thread] = None
-_WARM_LOCK = threading.Lock()
-
-
-def warm_up_async() -> None:
-    """Import Numba and load (or, the first time on a machine, compile) the kernels in a daemon thread,
-    once per process, so the first frame does not wait for them; the stages that call this (the style
-    prefetch, ``Stylized3DPhoto``) run while the photo's depth, LDI or geometry are being built."""
-    global _WARM
-    with _WARM_LOCK:
-        if _WARM is None:
-            _WARM = threading.Thread(target=_warm_up, name="stylize3d-raster-warm-up", daemon=True)
-            _WARM.start()
-
-
-def wait_warm(timeout: Optional[float] = None) -> None:
-    """Start the warm-up if needed (:func:`warm_up_async`) and wait until the kernels are loaded."""
-    warm_up_async()
-    _WARM.join(timeout)
-
-
-def _warm_up() -> None:
-    try:
-        if not available():
-            return
-        K = torch.tensor([[2.0, 0.0, 1.0], [0.0, 2.0, 1.0], [0.0, 0.0, 1.0]])
-        from .rasterize import RasterSettings
-
-        with torch.inference_mode():  # one point: each kernel runs once with the real argument types
-            rasterize_fast(torch.tensor([[0.0, 0.0, 1.0]]), torch.ones(1, 1), K, RasterSettings(2, 2))
-    except Exception:  # noqa: BLE001 (a failed warm-up is only a slower first frame; the render reports)
-        return
-
-
-
 def available() -> bool:
     """Whether the compiled path can run (Numba imports)."""
     return _kernels() is not None
@@ -99,24 +63,29 @@ def available() -> bool:
 
 def applies(points_cam: torch.Tensor, features: torch.Tensor, settings, point_size) -> bool:
     """Whether :func:`rasterize_fast` computes this call (else the tensor path does)."""
-    return (ENABLED and point_size is None and settings.supersample == 1 and not settings.soft_edges
+    return (settings.backend == "auto" and not _FAILED and point_size is None and settings.supersample == 1 and not settings.soft_edges
             and not settings.blend_coverage and features.dtype == torch.float32
             and points_cam.dtype == torch.float32 and features.device.type == "cpu"
             and points_cam.device.type == "cpu" and not (torch.is_grad_enabled() and features.requires_grad)
             and available())
 
 
-ENABLED = True
-"""False: :func:`~stylize3d_core.render.rasterize.rasterize_points` always takes the tensor path
-(``bench speed`` compares the two; :func:`disable` sets it after a failure)."""
+_FAILED = False
+"""True after :func:`disable`: the compiled path failed on this machine and every later call takes the tensor
+path (``RasterSettings.backend`` "tensor" asks for the tensor path on a single call)."""
+
+
+def failed() -> bool:
+    """Whether the compiled path failed in this process (:func:`disable`)."""
+    return _FAILED
 
 
 def disable(exc: BaseException) -> None:
     """Turn the compiled path off for this process after it failed (a kernel that does not compile or run
     on this machine): a warning names the error once, and every later call takes the tensor path."""
-    global ENABLED
-    if ENABLED:
-        ENABLED = False
+    global _FAILED
+    if not _FAILED:
+        _FAILED = True
         warnings.warn(f"stylize3d: the rasterizer's compiled path failed ({type(exc).__name__}: {exc}); "
                       "using the tensor path from now on", RuntimeWarning, stacklevel=3)
 

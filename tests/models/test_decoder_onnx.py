@@ -200,7 +200,7 @@ def test_a_failing_runtime_falls_back_to_torch(monkeypatch):
     def broken(*a, **k):
         raise RuntimeError("no kernel for this CPU")
 
-    monkeypatch.setattr(rt, "run", broken)
+    monkeypatch.setattr(rt, "run", broken)  # run_or_none catches it
     monkeypatch.setattr(decoder_onnx, "ENABLED", True)
     with torch.inference_mode():
         ref = dec(feats, mask)

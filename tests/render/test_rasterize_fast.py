@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 import warnings
 
 import pytest
 import torch
 
 from stylize3d_core import threads as threads_module
-from stylize3d_core.errors import RenderInterrupted
+from stylize3d_core.errors import InputError, RenderInterrupted
 from stylize3d_core.render import rasterize_fast
 from stylize3d_core.render.rasterize import RasterSettings, rasterize_points
 from stylize3d_core.geometry.camera import intrinsics_from_fov
@@ -36,9 +37,7 @@ def _both(pts, feats, K, settings, monkeypatch, **kw):
     with torch.inference_mode():
         assert rasterize_fast.applies(pts, feats, settings, None)
         fast = rasterize_points(pts, feats, K, settings, **kw)
-        monkeypatch.setattr(rasterize_fast, "ENABLED", False)
-        slow = rasterize_points(pts, feats, K, settings, **kw)
-        monkeypatch.setattr(rasterize_fast, "ENABLED", True)
+        slow = rasterize_points(pts, feats, K, replace(settings, backend="tensor"), **kw)
     return fast, slow
 
 
@@ -136,9 +135,8 @@ def test_a_failing_compiled_path_falls_back_to_the_tensor_path(monkeypatch):
     pts, feats, K = random_scene(11, 13, 300, 4, seed=9)
     settings = RasterSettings(11, 13)
     with torch.inference_mode():
-        monkeypatch.setattr(rasterize_fast, "ENABLED", False)
-        slow = rasterize_points(pts, feats, K, settings)
-        monkeypatch.setattr(rasterize_fast, "ENABLED", True)
+        slow = rasterize_points(pts, feats, K, replace(settings, backend="tensor"))
+        monkeypatch.setattr(rasterize_fast, "_FAILED", False)  # restored after the test
 
         def broken(*args, **kwargs):
             raise RuntimeError("no LLVM here")
@@ -146,9 +144,18 @@ def test_a_failing_compiled_path_falls_back_to_the_tensor_path(monkeypatch):
         monkeypatch.setattr(rasterize_fast, "rasterize_fast", broken)
         with pytest.warns(RuntimeWarning, match="no LLVM here"):
             frags = rasterize_points(pts, feats, K, settings)
-        assert not rasterize_fast.ENABLED and not rasterize_fast.applies(pts, feats, settings, None)
+        assert rasterize_fast.failed() and not rasterize_fast.applies(pts, feats, settings, None)
         for a, b in zip(frags, slow):
             assert torch.equal(a, b)  # the tensor path's result
         with warnings.catch_warnings():
             warnings.simplefilter("error")
             rasterize_points(pts, feats, K, settings)  # no second warning: the path stays off
+
+
+def test_the_backend_is_a_setting():
+    pts, feats, K = random_scene(9, 8, 200, 3, seed=4)
+    with torch.inference_mode():
+        assert rasterize_fast.applies(pts, feats, RasterSettings(9, 8), None)
+        assert not rasterize_fast.applies(pts, feats, RasterSettings(9, 8, backend="tensor"), None)
+    with pytest.raises(InputError, match="backend: must be one of auto, tensor"):
+        RasterSettings(9, 8, backend="gpu")
