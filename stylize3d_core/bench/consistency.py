@@ -25,13 +25,7 @@ import torch
 
 from ..eval.quality import sharpness  # noqa: F401 (also this module's public name, as before)
 from ..errors import InputError
-from .report import write_table
-
-Log = Callable[[str], None]
-
-
-def _quiet(_: str) -> None:
-    return None
+from .report import Log, progress, quiet, write_table
 
 
 @dataclass(frozen=True)
@@ -61,7 +55,7 @@ def temporal_smoothing(frames: List[np.ndarray], keep: float) -> List[np.ndarray
     return out
 
 
-def run_consistency(out: Path, quick: bool = False, show_progress: bool = False, log: Log = _quiet,
+def run_consistency(out: Path, quick: bool = False, show_progress: bool = False, log: Log = quiet,
                     photo: Optional[str] = None, style: Optional[str] = None) -> List[dict]:
     from ..eval.baseline import baseline_frames
     from ..eval.consistency import consistency_metrics, long_range_pairs, short_range_pairs
@@ -74,8 +68,6 @@ def run_consistency(out: Path, quick: bool = False, show_progress: bool = False,
     from ..render.plain import PlainRenderer, frame_size
     from ..resources import resolve_model, sample_photo, style_image
     from ..stylize import Stylized3DPhoto
-    from .suites import progress
-
     preset = QUICK if quick else FULL
     p3d = load_photo3d(PhotoSpec(photo=str(photo or sample_photo()), depth="prior", max_size=preset.photo_size))
     style_rgb = load_image(str(style or style_image()), max_size=256).rgb

@@ -37,13 +37,7 @@ import torch
 
 from ..eval.timing import time_runs
 from ..models.decoder import native_bfloat16
-from .report import write_table
-
-Log = Callable[[str], None]
-
-
-def _quiet(_: str) -> None:
-    return None
+from .report import Log, progress, quiet, write_table
 
 
 @dataclass(frozen=True)
@@ -150,7 +144,7 @@ def copy_limit(mib: int) -> Tuple[Callable[[], object], float]:
     return (lambda: b.copy_(a)), 2.0 * a.numel() * 4
 
 
-def run_floor(out: Path, quick: bool = False, show_progress: bool = False, log: Log = _quiet,
+def run_floor(out: Path, quick: bool = False, show_progress: bool = False, log: Log = quiet,
               photo: Optional[str] = None) -> List[dict]:
     import tempfile
 
@@ -162,8 +156,6 @@ def run_floor(out: Path, quick: bool = False, show_progress: bool = False, log: 
     from ..render.rasterizer import PointRasterizer
     from ..resources import resolve_model
     from .photos import photo_at_megapixels
-    from .suites import progress
-
     p = QUICK if quick else FULL
     steps = iter(progress(range(3), 3, "floor", show_progress))
     next(steps)

@@ -21,15 +21,9 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
-from typing import Callable, Dict, List, Optional
+from typing import Dict, List, Optional
 
-from .report import _json_value, machine, markdown_table
-
-Log = Callable[[str], None]
-
-
-def _quiet(_: str) -> None:
-    return None
+from .report import Log, _json_value, machine, markdown_table, progress, quiet
 
 
 def _clean(v):
@@ -69,7 +63,7 @@ def pair_rows(pairs: List[dict]) -> List[dict]:
             for p in pairs for m in METHODS if m in p["metrics"]]
 
 
-def run_quality(out: Path, quick: bool = False, show_progress: bool = False, log: Log = _quiet,
+def run_quality(out: Path, quick: bool = False, show_progress: bool = False, log: Log = quiet,
                 model: Optional[str] = None, eval_data: Optional[str] = None,
                 strength: Optional[float] = None, *, preset=None, photos=None, styles=None) -> List[dict]:
     """Measure every pair (``quick``: the small preset) and write the report to ``out``; returns the summary rows.
@@ -92,8 +86,6 @@ def run_quality(out: Path, quick: bool = False, show_progress: bool = False, log
     from ..render.plain import PlainRenderer, frame_size
     from ..resources import resolve_model
     from ..stylize import Stylized3DPhoto, StylizeSettings
-    from .suites import progress
-
     t_start = time.perf_counter()
     preset = preset if preset is not None else (QUICK if quick else FULL)
     photos = tuple(QUALITY_PHOTOS if photos is None else photos)

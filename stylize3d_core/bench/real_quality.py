@@ -26,21 +26,16 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
-from typing import Callable, Dict, List, Mapping, Optional
+from typing import Dict, List, Mapping, Optional
 
 import numpy as np
 
-from .report import markdown_table
+from .report import Log, markdown_table, quiet
 
-Log = Callable[[str], None]
 
 METRICS = ("style_dist", "edge_f1", "short", "long", "short_dis", "long_dis")
 LABELS = {"style_dist": "style-embedding dist", "edge_f1": "edge F1", "short": "warp short", "long": "warp long",
           "short_dis": "warp short, disoccluded", "long_dis": "warp long, disoccluded"}
-
-
-def _quiet(_: str) -> None:
-    return None
 
 
 def _mean(values: List[float]) -> float:
@@ -51,7 +46,7 @@ def _mean(values: List[float]) -> float:
 def run_real_quality(out: Path, real_dir: str, *, model: Optional[str] = None,
                      others: Optional[Mapping[str, str]] = None, pairs: int = 16, frames: int = 16,
                      frame_long_side: int = 512, photo_size: int = 768, style_every: int = 4, board_frame: int = 12,
-                     seed: int = 0, log: Log = _quiet) -> Dict[str, Dict[str, float]]:
+                     seed: int = 0, log: Log = quiet) -> Dict[str, Dict[str, float]]:
     """Measure ``pairs`` held-out pairs (see the module docstring); returns ``{method: {metric: mean}}``."""
     from ..errors import InputError
     from ..eval.baseline import make_engine, stylize_frames_2d

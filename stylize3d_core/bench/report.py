@@ -14,7 +14,7 @@ import os
 import platform
 import time
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Callable, Dict, Iterable, List, Optional, Sequence, Tuple, TypeVar
 
 import numpy as np
 
@@ -22,6 +22,25 @@ from ..errors import InputError
 from ..io.atomic import write_atomically
 
 Row = Dict[str, object]
+
+
+T = TypeVar("T")
+Log = Callable[[str], None]
+"""Where a suite reports progress in words (the command line prints it; tests pass a list's append)."""
+
+
+def quiet(_: str) -> None:
+    """A :data:`Log` that says nothing."""
+    return None
+
+
+def progress(items: Iterable[T], total: int, desc: str, enabled: bool) -> Iterable[T]:
+    """``items`` with a tqdm progress bar on stderr (or plain, when not ``enabled``)."""
+    if not enabled:
+        return items
+    from tqdm import tqdm
+
+    return tqdm(items, total=total, desc=desc, unit="case", leave=False)
 
 
 def machine() -> Dict[str, object]:

@@ -16,20 +16,15 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Callable, List, Optional, Sequence
+from typing import List, Optional, Sequence
 
-from .report import write_table
+from .report import Log, progress, quiet, write_table
 
-Log = Callable[[str], None]
 
 FULL_MEGAPIXELS = (0.25, 0.5, 1.0, 2.0, 4.0)
 FULL_FRAMES = (256, 512, 1024)
 QUICK_MEGAPIXELS = (0.005, 0.02)
 QUICK_FRAMES = (48, 96)
-
-
-def _quiet(_: str) -> None:
-    return None
 
 
 def measure(megapixels: float, frames: Sequence[int], photo: Optional[str] = None, repeats: int = 1) -> List[dict]:
@@ -73,10 +68,8 @@ def measure(megapixels: float, frames: Sequence[int], photo: Optional[str] = Non
     return rows
 
 
-def run_scaling(out: Path, quick: bool = False, show_progress: bool = False, log: Log = _quiet,
+def run_scaling(out: Path, quick: bool = False, show_progress: bool = False, log: Log = quiet,
                 photo: Optional[str] = None) -> List[dict]:
-    from .suites import progress
-
     mps, frames = (QUICK_MEGAPIXELS, QUICK_FRAMES) if quick else (FULL_MEGAPIXELS, FULL_FRAMES)
     rows: List[dict] = []
     root = Path(__file__).resolve().parents[2]

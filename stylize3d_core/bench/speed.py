@@ -35,7 +35,7 @@ import statistics
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable, List, Optional, Sequence, Tuple
+from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 import torch
@@ -43,13 +43,8 @@ import torch
 from ..eval.timing import median_time
 from ..models.decoder import native_bfloat16
 from ..threads import torch_threads
-from .report import pareto_front, scatter_plot, write_table
-
-Log = Callable[[str], None]
-
-
-def _quiet(_: str) -> None:
-    return None
+from ..eval.metrics import psnr
+from .report import Log, pareto_front, progress, quiet, scatter_plot, write_table
 
 
 @dataclass(frozen=True)
@@ -128,11 +123,6 @@ def variants(quick: bool) -> List[Variant]:
 
 def _bf16(on: bool):
     return torch.autocast("cpu", dtype=torch.bfloat16) if on else contextlib.nullcontext()
-
-
-def psnr(a: np.ndarray, b: np.ndarray) -> float:
-    mse = float(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2))
-    return math.inf if mse == 0 else 10.0 * math.log10(1.0 / mse)
 
 
 class PerceptualDistance:
@@ -286,8 +276,6 @@ def measure_variants(scene: SpeedScene, vs: Sequence[Variant], repeats: int, war
     every round times each variant once, so a change of load on a shared machine hits them all alike.
     ``slow`` variants are timed in the first round only, without a warm-up. ``per_round``: each tuple
     also holds the list of seconds per frame of every round."""
-    from .suites import progress
-
     runs = [VariantRun(scene, v) for v in vs]
     first_t: List[List[float]] = [[] for _ in vs]
     frame_t: List[List[float]] = [[] for _ in vs]
@@ -372,7 +360,7 @@ PSNR_CAP = 60.0
 """Identical frames (infinite PSNR) are plotted at this PSNR."""
 
 
-def run_speed(out: Path, quick: bool = False, show_progress: bool = False, log: Log = _quiet,
+def run_speed(out: Path, quick: bool = False, show_progress: bool = False, log: Log = quiet,
               photo: Optional[str] = None, style: Optional[str] = None) -> List[dict]:
     preset = QUICK if quick else FULL
     scene = speed_scene(preset, photo, style)
@@ -421,7 +409,7 @@ def run_speed(out: Path, quick: bool = False, show_progress: bool = False, log: 
 # ---------------------------------------------------------------------------- skips
 
 
-def run_skips(out: Path, quick: bool = False, show_progress: bool = False, log: Log = _quiet,
+def run_skips(out: Path, quick: bool = False, show_progress: bool = False, log: Log = quiet,
               photo: Optional[str] = None, style: Optional[str] = None) -> List[dict]:
     """What the caches skip, measured: each row is a change, the time with and without the skip, the difference."""
     preset = QUICK if quick else FULL

@@ -8,29 +8,13 @@ are for a quiet machine. Every figure is timed with ``eval/timing.py``
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Callable, Iterable, List, Optional, TypeVar
+from typing import List, Optional
 
-from .report import write_table
+from .report import Log, progress, quiet, write_table
 from .stress import cases as stress_cases, run_case
 
-T = TypeVar("T")
-Log = Callable[[str], None]
 
-
-def _quiet(_: str) -> None:
-    return None
-
-
-def progress(items: Iterable[T], total: int, desc: str, enabled: bool) -> Iterable[T]:
-    """``items`` with a tqdm progress bar on stderr (or plain, when not ``enabled``)."""
-    if not enabled:
-        return items
-    from tqdm import tqdm
-
-    return tqdm(items, total=total, desc=desc, unit="case", leave=False)
-
-
-def run_stress(out: Path, quick: bool = False, show_progress: bool = False, log: Log = _quiet) -> List[dict]:
+def run_stress(out: Path, quick: bool = False, show_progress: bool = False, log: Log = quiet) -> List[dict]:
     """Run the stress cases (``--quick``: the small ones without the model, and two with it); write ``stress.md/json``."""
     chosen = stress_cases()
     if quick:
@@ -50,7 +34,7 @@ def run_stress(out: Path, quick: bool = False, show_progress: bool = False, log:
     return rows
 
 
-def run_suite(name: str, out, quick: bool = False, show_progress: bool = False, log: Log = _quiet,
+def run_suite(name: str, out, quick: bool = False, show_progress: bool = False, log: Log = quiet,
               photo: Optional[str] = None, style: Optional[str] = None, model: Optional[str] = None,
               eval_data: Optional[str] = None) -> List[dict]:
     """Run the suite ``name`` (speed, consistency, scaling, stress, skips, targets, floor, quality) and write its tables to ``out``.

@@ -33,15 +33,10 @@ import tempfile
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable, List, Optional
+from typing import List, Optional
 
-from .report import write_table
-
-Log = Callable[[str], None]
-
-
-def _quiet(_: str) -> None:
-    return None
+from ..eval.metrics import psnr
+from .report import Log, progress, quiet, write_table
 
 
 @dataclass(frozen=True)
@@ -56,12 +51,6 @@ class TargetsPreset:
 
 FULL = TargetsPreset(megapixels=1.0, big_megapixels=4.0, frame=512, preview=256, video_frames=90, renders=7)
 QUICK = TargetsPreset(megapixels=0.01, big_megapixels=0.02, frame=64, preview=32, video_frames=6, renders=2)
-
-
-def _psnr(a, b) -> float:
-    from .speed import psnr
-
-    return psnr(a, b)
 
 
 def measure(megapixels: float, frame: int, preview: int, video_frames: int, renders: int,
@@ -133,7 +122,7 @@ def measure(megapixels: float, frame: int, preview: int, video_frames: int, rend
                 full.append(time.perf_counter() - s0)
                 if k < 3:  # against the full-quality float32 frame (the default may decode in bfloat16)
                     default, st.settings = st.settings, replace(st.settings, bfloat16=False)
-                    prev_db.append(_psnr(p, st.render(c, Hp, Wp)))
+                    prev_db.append(psnr(p, st.render(c, Hp, Wp)))
                     st.settings = default
             out.update({"preview": [Hp, Wp], "preview_ms": 1000 * float(np.median(prev)),
                         "full_ms": 1000 * float(np.median(full)), "preview_psnr_db": float(np.mean(prev_db))})
@@ -148,7 +137,7 @@ def measure(megapixels: float, frame: int, preview: int, video_frames: int, rend
                 st.settings = reference
                 ref = st.render(c, H, W)
                 st.settings = export
-                final_db.append(min(_psnr(st.render(c, H, W), ref), 1e9))
+                final_db.append(min(psnr(st.render(c, H, W), ref), 1e9))
             out["export_psnr_db"] = float(np.mean(final_db)) if max(final_db) < 1e9 else math.inf
             out["export_settings"] = repr(export)
             out["bfloat16"] = export.decode_bfloat16
@@ -178,10 +167,8 @@ def _child(args: List[str]) -> dict:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def run_targets(out: Path, quick: bool = False, show_progress: bool = False, log: Log = _quiet,
+def run_targets(out: Path, quick: bool = False, show_progress: bool = False, log: Log = quiet,
                 photo: Optional[str] = None) -> List[dict]:
-    from .suites import progress
-
     p = QUICK if quick else FULL
     jobs = [[str(p.megapixels), str(p.frame), str(p.preview), str(p.video_frames), str(p.renders)],
             [str(p.big_megapixels), str(p.frame), str(p.preview), "0", "0"]]

@@ -31,6 +31,7 @@ from ..scene.photo3d import Photo3D, Photo3DSettings
 from ..scene.pointcloud import PointCloud
 from ..train.procedural import random_scene, ray_cast
 from ..train.textures import random_texture
+from .metrics import psnr
 
 
 class ProceduralViews(NamedTuple):
@@ -71,12 +72,6 @@ def procedural_views(seed: int = 3, size: Tuple[int, int] = (96, 128), fov_y_deg
                           fov_y_deg, f"view{i}.png"))
     truth = ray_cast(scene, Cameras.create(held_out, fov_y_deg), h, w, samples=2).rgb
     return ProceduralViews(views, np.asarray(held_out, np.float64), truth)
-
-
-def psnr(a: np.ndarray, b: np.ndarray) -> float:
-    """PSNR in dB of two images in [0, 1]."""
-    mse = float(np.mean((np.asarray(a, np.float64) - np.asarray(b, np.float64)) ** 2))
-    return math.inf if mse == 0 else 10.0 * math.log10(1.0 / mse)
 
 
 def _single_photos(data: ProceduralViews) -> List[Photo3D]:

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from stylize3d_core.errors import ExportError, InputError
+from stylize3d_core.eval.metrics import psnr
 from stylize3d_core.export.web_page import (budget_stride, decode_points, encode_points, orbit_centre,
                                             quantise_points, read_page, write_page)
 from stylize3d_core.geometry.camera import focal_from_fov
@@ -79,11 +80,6 @@ def test_bad_outputs_name_the_file_and_overwrite_nothing(photo3d, tmp_path):
         quantise_points(bad, photo3d.points.rgb, photo3d.size, photo3d.fov_y_deg, 10 ** 6)
 
 
-def psnr(a, b):
-    mse = np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2)
-    return 10 * np.log10(255.0 ** 2 / max(mse, 1e-12))
-
-
 HOME_PSNR_DB = 24.0
 """The page's home view against the desktop's plain render of the same camera at the same size (square
 splats and no coverage blending against tent splats: edges differ by up to a pixel)."""
@@ -104,7 +100,7 @@ def test_page_in_chromium(photo3d, tmp_path):
         assert home.shape == (h, w, 3)
         cams = photo3d_cameras(photo3d)
         desk = np.rint(np.clip(renderer.render(cams[0], h, w), 0, 1) * 255).astype(np.uint8)
-        assert psnr(home, desk) > HOME_PSNR_DB
+        assert psnr(home, desk, peak=255.0) > HOME_PSNR_DB
         b.drag(100, 0)
         moved = b.canvas()
         pose = b.script("return stylize3d.getPose();")

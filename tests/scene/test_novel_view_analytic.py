@@ -4,13 +4,13 @@ The photo and its depth are ray-cast analytically; the 3D photo built from them
 is rendered from a moved camera and compared with the analytic novel view.
 """
 
-import math
 
 import numpy as np
 import pytest
 import torch
 
 from stylize3d_core.depth.types import DepthMap
+from stylize3d_core.eval.metrics import psnr
 from stylize3d_core.geometry.camera import Cameras, NEAR_DEPTH, focal_from_fov
 from stylize3d_core.render.plain import PlainRenderer, PlainRenderSettings
 from stylize3d_core.scene.photo3d import Photo3D, Photo3DSettings
@@ -58,12 +58,6 @@ def ray_cast(centre, H, W, ss=4):
     on_card = (np.abs(centre[0] + tc * dxr) <= CARD_HALF) & (np.abs(centre[1] + tc * dyr) <= CARD_HALF)
     depth = np.where(on_card, CARD_Z, WALL_Z) - centre[2]
     return rgb.astype(np.float32), depth.astype(np.float32), hidden > 0
-
-
-def psnr(a, b, mask=None):
-    d = (a - b) ** 2
-    mse = d[mask].mean() if mask is not None else d.mean()
-    return 10 * math.log10(1.0 / max(mse, 1e-12))
 
 
 @pytest.fixture(scope="module")

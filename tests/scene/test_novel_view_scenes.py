@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 from stylize3d_core.depth.types import DepthMap
+from stylize3d_core.eval.metrics import psnr
 from stylize3d_core.geometry.camera import NEAR_DEPTH, Cameras
 from stylize3d_core.geometry.trajectories import DEFAULT_XY, DEFAULT_Z
 from stylize3d_core.render.plain import PlainRenderer
@@ -114,10 +115,6 @@ def camera(t) -> Cameras:
     pose = np.eye(4)
     pose[:3, 3] = t
     return Cameras.create(pose, FOV)
-
-
-def psnr(a: np.ndarray, b: np.ndarray) -> float:
-    return 10 * math.log10(1.0 / max(float(((a - b) ** 2).mean()), 1e-12))
 
 
 def regions(scene: Scene, truth) -> tuple:
