@@ -21,8 +21,7 @@ from stylize3d_core.io.video import ExportCancelled, console_progress
 from stylize3d_core.pipeline import RenderJob, run_render
 
 from .options import add_options, from_args
-
-PROG = "stylize3d"
+from .signals import PROG, install_signal_handlers, interrupted_message, interrupted_status, show_warning
 
 
 def _add_render(sub: "argparse._SubParsersAction") -> None:
@@ -335,7 +334,6 @@ def main(argv: Optional[List[str]] = None) -> int:
     """
     import warnings
 
-    from app.entry import interrupted_message, interrupted_status, show_warning
     from stylize3d_core.memory import keep_freed_memory
 
     args = build_parser().parse_args(argv)
@@ -366,12 +364,6 @@ def main(argv: Optional[List[str]] = None) -> int:
         warnings.showwarning = shown
 
 
-def entrypoint() -> None:
-    """Console-script entry point: the signal-safe :func:`app.entry.entrypoint`."""
-    from app.entry import entrypoint as safe_entrypoint
-
-    safe_entrypoint()
-
-
-if __name__ == "__main__":
-    entrypoint()
+if __name__ == "__main__":  # python -m app.cli (torchrun): the handlers once torch is imported
+    install_signal_handlers()
+    sys.exit(main())

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from app import entry
+from app import entry, signals
 from app.cli import INTERNAL_ERROR, main
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -172,12 +172,12 @@ def entry_handlers():
     from stylize3d_core.io.atomic import remove_commit_check
 
     saved = {s: signal.getsignal(s) for s in entry.HANDLED}
-    entry.install_signal_handlers()
+    signals.install_signal_handlers()
     yield
     for s, h in saved.items():
         signal.signal(s, h)
-    entry._received.clear()
-    remove_commit_check(entry.raise_if_interrupted)
+    signals._received.clear()
+    remove_commit_check(signals.raise_if_interrupted)
 
 
 @pytest.mark.parametrize("flag, name", [("--save-ply", "c.ply"), ("--save-camera-path", "c.json"),
@@ -365,7 +365,7 @@ def test_a_signal_inside_a_c_extensions_import_is_the_interruption(capsys, monke
 
     class Importing(types.ModuleType):  # ``from app.cli import main`` as numpy's import failed then
         def __getattr__(self, name):
-            entry._received.append(int(signal.SIGTERM))
+            signals._received.append(int(signal.SIGTERM))
             raise ImportError('PyCapsule_Import could not import module "datetime"')
 
     monkeypatch.setattr(entry, "install_signal_handlers", lambda: None)  # keep pytest's own handlers
@@ -373,7 +373,7 @@ def test_a_signal_inside_a_c_extensions_import_is_the_interruption(capsys, monke
     try:
         assert entry.run([]) == 143
     finally:
-        entry._received.clear()
+        signals._received.clear()
     assert capsys.readouterr().err == "stylize3d: terminated (SIGTERM); nothing was written\n"
     monkeypatch.setitem(sys.modules, "app.cli", types.ModuleType("app.cli"))  # no signal: the real error
     with pytest.raises(ImportError):
