@@ -362,7 +362,7 @@ def window(model: str, megapixels: float, tmp: str, max_size: int, repeats: int,
 
     import numpy as np
 
-    from app.viewer.script import run_viewer_process
+    from app.viewer import run_viewer_process
     from app.viewer.xserver import start_xvfb, xtest_libs
 
     screen = (1280, 800)

@@ -21,7 +21,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from app.viewer.script import run_viewer_process  # noqa: E402
+from app.viewer import run_viewer_process  # noqa: E402
 from app.viewer.xserver import start_xvfb, xtest_click, xtest_libs  # noqa: E402
 
 SAMPLES = ROOT / "assets" / "samples"

@@ -4,7 +4,6 @@
                      [--model CHECKPOINT | --no-model]
                      [--max-size 640] [--fov DEG] [--strength 1] [--threads 1] [--size 1280x800] [--invert-wheel]
                      [--full-threads N] [--decoder-threads N] [--render-backend opengl|vulkan|auto]
-                     [--test-script steps.json --test-report report.json]
 
 Modules: :mod:`.orbit` (camera math), :mod:`.state` (view state, preview sizes,
 typed paths), :mod:`.render_state` (when the view needs which frame), :mod:`.backend` (the
@@ -24,6 +23,7 @@ as ``stylize3d render``'s are; only the viewer's own options are written here.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from typing import List, Optional
 
@@ -75,8 +75,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "auto: Open3D's choice, Vulkan where the only Vulkan device is the software llvmpipe, "
                         "where opengl doubled the frames shown while dragging: see app/viewer/backend.py)")
     p.add_argument("--size", default="1280x800", metavar="WxH", help="window size in pixels (default 1280x800)")
-    p.add_argument("--test-script", default=None, metavar="JSON", help="run these test steps (see app/viewer/script.py)")
-    p.add_argument("--test-report", default=None, metavar="JSON", help="where the test script writes its report")
+    # the test harness (app/viewer/script.py; docs/architecture.md, "Driving the viewer"): not in --help
+    p.add_argument("--test-script", default=None, metavar="JSON", help=argparse.SUPPRESS)
+    p.add_argument("--test-report", default=None, metavar="JSON", help=argparse.SUPPRESS)
     return p
 
 
@@ -133,7 +134,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     torch.set_num_threads(args.threads)
     # The compute worker runs Python between its torch calls; with the default 5 ms switch interval every
     # GUI callback (mouse moves, ticks, frames handed over) could wait that long for the GIL, several times per
-    # frame (measured: a busy Python thread cut an Open3D window's image updates from ~48 to ~21 per second).
+    # frame: a busy Python thread would halve the window's image updates.
     sys.setswitchinterval(GUI_SWITCH_INTERVAL_S)
     keep_freed_memory()  # stylize3d_core.memory: freed memory kept for the next frame
     from stylize3d_core.pipeline import warm_up
@@ -178,9 +179,19 @@ def main(argv: Optional[List[str]] = None) -> int:
     return 128 + received[0] if received else 0
 
 
+def run_viewer_process(argv: List[str], display: str) -> None:
+    """Entry point of a ``multiprocessing`` "spawn" child that runs the viewer on X display ``display``.
+
+    The child exits with the viewer's status (0, or 1 when a test script failed);
+    a crash shows as a negative exit code in the parent.
+    """
+    os.environ["DISPLAY"] = display
+    sys.exit(main(argv))
+
+
 def entrypoint() -> None:
     """Console-script entry point (``stylize3d-viewer``)."""
     sys.exit(main())
 
 
-__all__ = ["entrypoint", "main", "build_parser", "default_full_threads"]
+__all__ = ["entrypoint", "main", "build_parser", "default_full_threads", "run_viewer_process"]

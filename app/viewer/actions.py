@@ -42,6 +42,7 @@ from stylize3d_core.render.plain import frame_size
 
 from . import keyframe_edit as KE
 from . import panel as P
+from .host import ViewerHost
 from .orbit import HOME
 from .session import NO_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE, ExportJob, StylizeInfo
 from .state import (
@@ -53,7 +54,6 @@ from .state import (
 if TYPE_CHECKING:
     from stylize3d_core.pipeline import PhotoSpec
 
-    from .window import ViewerWindow
 
 IMAGE_FILTERS = ((".jpg .jpeg .png .webp .tif .tiff", "Images (JPEG, PNG, WebP, TIFF)"), ("", "All files"))
 DEPTH_FILTERS = ((".png .npy .pfm .tif .tiff .exr", "Depth (PNG16, NPY, PFM, TIFF, EXR)"), ("", "All files"))
@@ -79,7 +79,7 @@ def ui_callback(fn: Callable) -> Callable:
 class Controller:
     """One part of the window's behaviour (see the module docstring). Thread use: GUI main thread only."""
 
-    def __init__(self, window: "ViewerWindow") -> None:
+    def __init__(self, window: ViewerHost) -> None:
         self.window = window
 
     def show_error(self, what: str, error: BaseException) -> None:
@@ -122,7 +122,7 @@ class PhotoController(Controller):
     """Photos, styles, the depth source and its edge alignment, the sample, encoding for the model; recent
     photos, the style strip (bundled and recently used styles), a second style and its mix."""
 
-    def __init__(self, window: "ViewerWindow") -> None:
+    def __init__(self, window: ViewerHost) -> None:
         super().__init__(window)
         self._strip: list = []
 
@@ -587,7 +587,7 @@ class CameraPathController(Controller):
 class ExportController(Controller):
     """Video export (progress, Cancel) and screenshots."""
 
-    def __init__(self, window: "ViewerWindow", paths: CameraPathController) -> None:
+    def __init__(self, window: ViewerHost, paths: CameraPathController) -> None:
         super().__init__(window)
         self.paths = paths
         self._cancel: Optional[threading.Event] = None  # set while an export runs

@@ -45,12 +45,12 @@ from stylize3d_core.scene.masks import check_mask, grabcut_mask, load_mask_file,
 from stylize3d_core.scene.photo3d import Photo3DSettings
 
 from .actions import JSON_FILTERS, Controller, ui_callback
+from .host import ViewerHost
 from .layers import ViewerLayers
 from .state import shows_stylized
 
 if TYPE_CHECKING:
     from .session import ViewerSession
-    from .window import ViewerWindow
 
 (MENU_VIEWS, MENU_CARD, MENU_CARD_CROSS, MENU_MASK_FILE, MENU_GRABCUT, MENU_PERSON, MENU_FG_STRENGTH,
  MENU_MASK_CLEAR, MENU_PLY, MENU_SPLAT, MENU_SBS, MENU_ANAGLYPH, MENU_LOOP, MENU_PATH_JSON, MENU_PATH_OPEN3D,
@@ -274,7 +274,7 @@ class ApplicationsController(Controller):
     Test hooks: ``dialog_fields`` (the open dialog's widgets by name) and ``dialog_ok`` (its OK button's
     action) describe the last dialog it showed."""
 
-    def __init__(self, window: "ViewerWindow") -> None:
+    def __init__(self, window: ViewerHost) -> None:
         super().__init__(window)
         self.foreground_strength = 0.0
         self.rect = DEFAULT_RECT

@@ -81,9 +81,10 @@ def recent_label(path: str, index: int) -> str:
 
 
 def build_menubar(recent_photos: Sequence[str] = (), recent_styles: Sequence[str] = (),
-                  stylized: bool = True) -> gui.Menu:
-    """The application's menu bar (File with its recent photos and styles, View, Help). Open3D menus
-    cannot change once built, so the window builds a new bar when the recent files change."""
+                  stylized: bool = True, extra: Sequence[Tuple[str, gui.Menu]] = ()) -> gui.Menu:
+    """The application's menu bar (File with its recent photos and styles, View, the ``extra`` menus as
+    (title, menu) pairs, Help). Open3D menus cannot change once built, so the window builds a new bar when
+    the recent files change."""
     file_menu = gui.Menu()
     file_menu.add_item("Open photo...   O", MENU_OPEN)
     file_menu.add_item("Open style...   S", MENU_STYLE)
@@ -118,8 +119,8 @@ def build_menubar(recent_photos: Sequence[str] = (), recent_styles: Sequence[str
     bar = gui.Menu()
     bar.add_menu("File", file_menu)
     bar.add_menu("View", view_menu)
-    from .applications import build_applications_menu  # (it imports this module)
-    bar.add_menu("Applications", build_applications_menu())
+    for title, menu in extra:
+        bar.add_menu(title, menu)
     bar.add_menu("Help", help_menu)
     return bar
 

@@ -52,20 +52,6 @@ from .state import ExportSettings, shows_stylized, user_choices
 from .window import ViewerWindow
 
 
-def run_viewer_process(argv: List[str], display: str) -> None:
-    """Entry point of a ``multiprocessing`` "spawn" child that runs the viewer on X display ``display``.
-
-    The child exits with the viewer's status (0, or 1 when a test script failed);
-    a crash shows as a negative exit code in the parent.
-    """
-    import sys
-
-    os.environ["DISPLAY"] = display
-    from . import main
-
-    sys.exit(main(argv))
-
-
 def read_script(path: str) -> List[Dict[str, Any]]:
     """The steps of a test script (a JSON list of objects with an "op")."""
     try:

@@ -48,7 +48,7 @@ from stylize3d_core.threads import torch_threads
 
 from . import panel as P
 from .actions import CameraPathController, ExportController, PhotoController, ui_callback
-from .applications import ApplicationsController
+from .applications import ApplicationsController, build_applications_menu
 from .backend import widget_image
 from .orbit import HOME, OrbitLimits, apply_drag, apply_wheel, orbit
 from .session import NO_MODEL, ViewerSession, ViewFrame, colour_jump, shown_as
@@ -175,7 +175,8 @@ class ViewerWindow:
 
     # -- construction -------------------------------------------------------------
     def _build(self) -> None:
-        self.app.menubar = P.build_menubar(self.settings.recent_photos, self.settings.recent_styles)
+        self.app.menubar = P.build_menubar(self.settings.recent_photos, self.settings.recent_styles,
+                                           extra=self._extra_menus())
         w = self.window = self.app.create_window("stylize3d viewer", self.options.width, self.options.height)
         self.em = em = w.theme.font_size
         self.image = gui.ImageWidget(widget_image(np.full((8, 12, 3), 32, np.uint8)))
@@ -355,6 +356,11 @@ class ViewerWindow:
         return box.get("value")
 
     # -- recent files (the settings file) ---------------------------------------------
+    @staticmethod
+    def _extra_menus():
+        """The menus between View and Help: the Applications menu (``applications.py``)."""
+        return (("Applications", build_applications_menu()),)
+
     def remember(self, settings: ViewerSettings) -> None:
         """Keep ``settings`` (recent files, last folder): write the settings file and rebuild the menu bar
         with the recent files. A settings file that cannot be written is said in the status line."""
@@ -365,7 +371,8 @@ class ViewerWindow:
             save_settings(settings)
         except Exception as e:  # not fatal: the history is only not kept for the next run
             self.set_status(f"Recent files not saved: {e}")
-        self.app.menubar = P.build_menubar(settings.recent_photos, settings.recent_styles, self.state.stylized)
+        self.app.menubar = P.build_menubar(settings.recent_photos, settings.recent_styles, self.state.stylized,
+                                           extra=self._extra_menus())
         self.window.set_needs_layout()
         self.photos.show_recent()
 
