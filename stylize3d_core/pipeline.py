@@ -90,10 +90,8 @@ class PhotoSpec:
 
 EXPORT_POINTS_PER_PIXEL = 7.0
 """The export default of ``StylizeSettings.final_points_per_pixel`` (``RenderJob.points_per_pixel``), picked
-from ``stylize3d bench speed``: at 512 px from a 1 MP photo (about 10 points per pixel) it is faster than
-every point. 6 was 41 dB PSNR from every point with the version-4 and -5 models but 39.7 dB with the
-sharper version 6, whose texture depends more on which points land; 7 is 43.6 dB in about the same time
-(404 against 394 ms; 8: 45.9 dB, 484 ms; the final-frame target is 40 dB)."""
+from ``stylize3d bench speed``: the fastest point budget whose frames stay within the 40 dB final-frame
+target of every point (at 512 px from a 1 MP photo, about 10 points land on each pixel)."""
 
 
 @documented
@@ -119,7 +117,7 @@ class RenderJob:
                                    "camera moves away).")
     points_per_pixel: float = option(EXPORT_POINTS_PER_PIXEL, low=0.5, high=100.0,
                                      help="stylized frames keep about this many points per output pixel where more "
-                                          "would land on each (a random subset; faster, 41 dB PSNR from every "
+                                          "would land on each (a random subset; faster, within 40 dB PSNR of every "
                                           "point at the default: stylize3d bench targets); 100 keeps nearly all.")
     camera_path: Optional[str] = option(None, metavar="JSON",
                                         help="follow the cameras of this camera-path JSON instead of "

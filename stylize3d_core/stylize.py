@@ -71,12 +71,9 @@ class StylizeSettings:
         strength: style strength in [0, 1]; 0 renders the photo through the model. Default
             :data:`DEFAULT_STRENGTH` (1: the full style).
         supersample: 1 (default) or 2 for full-quality frames (previews never supersample).
-        preview_points_per_pixel: points kept per output pixel in previews. Default 5 (10 in version 7 and 8
-            of the model, 5 before, 3 until version 6). Most of a preview's error against the full frame was
-            the rim the decoder leaves at a frame's edge, not the point subset: with the preview's border margin
-            as wide as the full frame's (8), 256x256 previews of the 1 MP sample with version 9 are 31.0 / 32.1
-            / 33.9 dB from the full frame at 4 / 5 / 6 points per pixel (10 with a margin of 4: 32.0 dB, 1.2-1.3x
-            the time of 5; the target is 30 dB).
+        preview_points_per_pixel: points kept per output pixel in previews. Default 5: the fewest that keep
+            a preview within the 30 dB target of the full frame (``bench targets``); with the border margin as
+            wide as the full frame's, the point subset is most of what remains of a preview's error.
         seed: seed of the point order and the encoder's subset.
         final_points_per_pixel: None (default): full frames rasterize every point. A number: full frames
             keep about this many points per output (super)pixel, as previews do (a prefix of the point
@@ -92,7 +89,7 @@ class StylizeSettings:
         bfloat16: None (default): the decoder runs under a bfloat16 autocast where this CPU computes
             bfloat16 natively (:func:`~stylize3d_core.models.decoder.native_bfloat16`: AVX-512 BF16 or
             AMX), float32 elsewhere; True or False forces it. The rasterizer, the encoder, the stylizer and
-            the palette map stay float32; bfloat16 frames are 55-61 dB PSNR from float32 ones (``bench speed``).
+            the palette map stay float32; ``bench speed`` measures bfloat16 frames against float32 ones.
         decoder_runtime: what runs the decoder's U-Net in float32: "auto" (default: ONNX Runtime for large
             frames, where it imports, torch for small ones, :func:`~stylize3d_core.models.decoder_onnx.prefers_onnx`),
             "onnxruntime" or "torch". ONNX Runtime gives the same frames within ~2e-6 and decodes a 768x512
@@ -102,15 +99,13 @@ class StylizeSettings:
             or "tensor" (:attr:`~stylize3d_core.render.rasterize.RasterSettings.backend`).
         border_margin: pixels rendered beyond each side of a full frame and cut off (default 8; 0: none).
             The U-Net's zero padding makes its outermost ~8 pixels differ from what it decodes inside a
-            frame (up to ~20 levels at the edge: a visible coloured rim); with the margin, the frame's edge
-            is decoded as its inside is, at ~4 % more time at 512x342. Rounded up to a multiple of the
+            frame (a visible coloured rim); with the margin, the frame's edge is decoded as its inside is,
+            for the few percent more pixels the margin adds. Rounded up to a multiple of the
             decoder's stride (at split-resolution decoding, times the decode scale), so the frame keeps the
             decoder's grid phase.
         preview_border_margin: the same for previews (default 8, as full frames: the rim is as wide at any
             size, so it covers more of a small preview; with the full frame's margin a preview decodes its
-            edge as the full frame does: 256x256 previews of the 1 MP sample with version 8 at 10 points per
-            pixel were 22.5 / 30.8 / 36.4 dB from the full frame with margins 0 / 4 / 8; 4 was the default
-            until version 9).
+            edge as the full frame does).
         prior_size: models with the 2D style prior (``ModelConfig.style_prior``): long side in pixels at which
             the prior paints the LDI's layer images (default 512, see :mod:`~stylize3d_core.models.style_prior`).
             Larger keeps more of the photo's detail and makes the painting's marks finer.

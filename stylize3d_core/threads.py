@@ -3,8 +3,8 @@
 chunks (``models/colour_transfer.py``), the k-NN grid's queries (``points/neighbours.py``), the IDW
 weights (``points/interpolate.py``) and the encoder's neighbour max (``models/encoder.py``). Jobs on
 it call Numba, numpy or OpenCV, not PyTorch: a PyTorch call gives its thread an OpenMP team of its own,
-and with more OpenMP threads than cores libgomp stops spinning between parallel regions (``embedding_bag``
-calls on the pool made every later 256 px preview 1-3 ms slower, 30.2 -> 33.6 ms measured side by side)."""
+and with more OpenMP threads than cores libgomp stops spinning between parallel regions, which slows every
+later PyTorch call of the process."""
 
 from __future__ import annotations
 

@@ -1,6 +1,7 @@
 """The layering rules of docs/architecture.md ("Layers"): the library never imports the viewer or a GUI toolkit."""
 
 import ast
+import re
 import shutil
 from pathlib import Path
 from typing import Iterator, List, Optional, Tuple
@@ -175,3 +176,131 @@ def test_planted_downward_import_is_allowed(library_copy):
         encoding="utf-8",
     )
     assert layer_violations(library_copy) == []
+
+
+# ---------------------------------------------------------------------------- import cycles
+
+ROOT = LIB.parent
+PACKAGES = ("stylize3d_core", "app", "stylize3d")
+"""The repository's importable packages (``assets/`` holds no code that imports)."""
+
+
+def _module_name(path: Path, root: Path) -> str:
+    parts = list(path.relative_to(root).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def import_graph(root: Path, packages: Tuple[str, ...] = PACKAGES) -> dict:
+    """{module: the modules of ``packages`` it imports}, over every import statement in a module (at the
+    top, inside functions, under ``if TYPE_CHECKING``), relative ones resolved, each to the deepest
+    module that exists (``from .a import b`` is ``a.b`` where that is a module, else ``a``)."""
+    files = {_module_name(p, root): p for pkg in packages for p in sorted((root / pkg).rglob("*.py"))}
+
+    def resolve(dotted: str) -> Optional[str]:
+        parts = dotted.split(".")
+        while parts:
+            if ".".join(parts) in files:
+                return ".".join(parts)
+            parts.pop()
+        return None
+
+    graph = {}
+    for name, path in files.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        found = set()
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                found.update(resolve(a.name) for a in node.names)
+            elif isinstance(node, ast.ImportFrom):
+                if node.level:
+                    up = package.split(".")[: len(package.split(".")) - node.level + 1]
+                    base = ".".join(up + ([node.module] if node.module else []))
+                else:
+                    base = node.module or ""
+                found.update(resolve(f"{base}.{a.name}") or resolve(base) for a in node.names)
+        found.discard(None)
+        found.discard(name)
+        graph[name] = found
+    return graph
+
+
+def import_cycles(graph: dict) -> List[List[str]]:
+    """The strongly connected components of more than one module (Tarjan's algorithm, iterative)."""
+    index, low, on_stack, stack, cycles = {}, {}, set(), [], []
+    counter = 0
+    for start in sorted(graph):
+        if start in index:
+            continue
+        work = [(start, iter(sorted(graph[start])))]
+        index[start] = low[start] = counter
+        counter += 1
+        stack.append(start)
+        on_stack.add(start)
+        while work:
+            node, children = work[-1]
+            child = next(children, None)
+            if child is not None:
+                if child not in index:
+                    index[child] = low[child] = counter
+                    counter += 1
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(graph.get(child, ())))))
+                elif child in on_stack:
+                    low[node] = min(low[node], index[child])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                component = []
+                while True:
+                    member = stack.pop()
+                    on_stack.discard(member)
+                    component.append(member)
+                    if member == node:
+                        break
+                if len(component) > 1:
+                    cycles.append(sorted(component))
+    return cycles
+
+
+def test_no_import_cycles():
+    cycles = import_cycles(import_graph(ROOT))
+    assert not cycles, "import cycles (break them; an import inside a function still counts):\n" + "\n".join(
+        " <-> ".join(c) for c in cycles)
+
+
+def test_planted_cycles_are_found(tmp_path):
+    pkg = tmp_path / "stylize3d_core"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "sub" / "__init__.py").write_text("")
+    (pkg / "a.py").write_text("from .sub import b\n")
+    (pkg / "sub" / "b.py").write_text("def f():\n    from ..c import g\n")  # inside a function
+    (pkg / "c.py").write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from . import a\n")
+    (pkg / "d.py").write_text("from . import a\n")  # imports into the cycle, not part of it
+    graph = import_graph(tmp_path, ("stylize3d_core",))
+    assert graph["stylize3d_core.d"] == {"stylize3d_core.a"}
+    assert import_cycles(graph) == [["stylize3d_core.a", "stylize3d_core.c", "stylize3d_core.sub.b"]]
+    (pkg / "c.py").write_text("import os\n")
+    assert import_cycles(import_graph(tmp_path, ("stylize3d_core",))) == []
+
+
+# ---------------------------------------------------------------------------- comments
+
+
+HISTORY = re.compile(r"sessions? \d|until version \d|in version \d of the model|the first version of|"
+                     r"was the default|\b\d+(\.\d+)? -> \d+(\.\d+)? ?(ms|dB|s)\b|issue \d+")
+"""Phrases of a journal: comments and docstrings say what the code does and why, not how a number or a
+default changed (measurements live in the files the bench commands write)."""
+
+
+def test_comments_state_contracts_not_history():
+    found = []
+    for pkg in PACKAGES:
+        for path in sorted((ROOT / pkg).rglob("*.py")):
+            for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+                if HISTORY.search(line):
+                    found.append(f"{path.relative_to(ROOT)}:{number}: {line.strip()}")
+    assert not found, "\n".join(found)

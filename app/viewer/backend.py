@@ -5,10 +5,8 @@ software one (Mesa's llvmpipe: no GPU, Xvfb, a remote desktop) it picks
 Filament's *Vulkan* back end. Open3D redraws the whole window at every turn of
 its loop that had a mouse move, and through llvmpipe's Vulkan those turns were
 slower and far more uneven than through its OpenGL, leaving the render worker
-less of the CPU while dragging (``bench_viewer.py --window`` on a quiet 2-core
-machine, the back ends alternating: 28.3-32.6 frames shown per second while
-dragging through OpenGL, 11.7-15.3 through Vulkan; GUI-loop turns median 13 ms
-against 16-19 ms, p90 18-19 ms against 90-159 ms). So :data:`DEFAULT_BACKEND` is
+less of the CPU while dragging (``bench_viewer.py --window`` compares the two:
+through Vulkan about half the frames are shown per second). So :data:`DEFAULT_BACKEND` is
 OpenGL; ``--render-backend auto`` (or ``$STYLIZE3D_RENDER_BACKEND=auto``) leaves
 Open3D's choice, ``vulkan`` forces Vulkan.
 

@@ -218,8 +218,8 @@ class ViewerSession:
 
         if self._style_encoder is None:
             self._style_encoder = StyleEncoder()
-        # full frames and exports keep the export default's point budget (Pareto-chosen by `bench speed`: 41 dB
-        # against every point); previews their own smaller one
+        # full frames and exports keep the export default's point budget (chosen by `bench speed` within the
+        # 40 dB final-frame target of every point); previews their own smaller one
         settings = StylizeSettings(strength=self.strength, final_points_per_pixel=EXPORT_POINTS_PER_PIXEL)
         s = Stylized3DPhoto(self.photo, ck, settings, style_encoder=self._style_encoder)
         if self._style_rgb is not None:

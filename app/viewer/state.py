@@ -85,8 +85,8 @@ class PreviewSettings:
         preview_long_side: long side of the first preview, pixels (later ones follow the measured
             render time, :func:`choose_preview_long_side`). Default 128.
         min_preview_long_side: smallest preview the adaptation may choose, and the size of the first
-            preview after a rest (what a new drag waits for). Default 48 (on a loaded 2-core machine a
-            64 px stylized preview alone takes ~35 ms, a 48 px one ~25 ms).
+            preview after a rest (what a new drag waits for). Default 48: small enough that a new drag's first
+            stylized preview comes within a frame or two on a loaded 2-core machine.
         max_preview_long_side: largest preview the adaptation may choose. Default 384.
         full_long_side: cap on the full-resolution frame's long side (it fits the view). Default 768.
         target_preview_s: time budget of rendering one preview frame. Default 0.035: with the

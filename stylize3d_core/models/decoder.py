@@ -186,20 +186,13 @@ class DecoderConfig:
     @classmethod
     def lite(cls, in_channels: int = 64, supersample: bool = False, transform_channels: int = 0,
              texture_channels: int = 0) -> "DecoderConfig":
-        """CPU decoder for the viewer: width 48 (12 channels at full resolution), 2 levels.
+        """CPU decoder for the viewer: width 48 (12 channels at full resolution), 2 levels, about 20k
+        multiply-adds per output pixel.
 
-        First chosen with ``benchmarks/bench_decoder.py`` (C_in = 64, widths 64/96/128/192,
-        i.e. 16/24/32/48 channels at full resolution) as width 96, the widest that decoded 512^2 in
-        <= 0.5 s and 256^2 in <= 0.1 s on 2 cores with >= 30 % headroom on the AVX-512 machine of the
-        first sessions. On the AVX2 machine of sessions 17-19 (float32 only) width 96 missed the 60 ms
-        preview and the viewer's 0.5 s full frame; version 8 of the model has width 64: its decoder
-        distilled from version 7's and trained on (``tools/distill_decoder.py``), the same quality figures
-        (``docs/quality.md``) for 2.2x fewer multiply-adds (33.6k per pixel against 72.6k): a 784x528
-        U-Net in 283 against 473 ms on two threads (ONNX Runtime), a 264x180 one in 25 against 45 ms
-        (torch). Version 9 has width 48, distilled from version 8's and trained on the same way (20.2k
-        multiply-adds per pixel): its convolutions at 272x272 take 20.8 against 29.0 ms on two threads (torch;
-        the full-resolution layers gain least: there a 3x3 convolution from 24 to 12 channels took 3.2 ms, one
-        from 24 to 16 channels 2.8 ms).
+        The width is the narrowest that keeps the quality figures of ``docs/quality.md``, so a preview and a
+        full frame fit the viewer's time targets on a 2-core CPU without native bfloat16 (``bench targets``).
+        A narrower decoder is distilled from a wider one and trained on (``tools/distill_decoder.py``). The
+        full-resolution layers gain least from a narrower width: their cost is mostly memory traffic.
         """
         return cls(in_channels=in_channels, width=48, levels=2, supersample=supersample,
                    transform_channels=transform_channels, transform_gain=1.0 / 48, texture_channels=texture_channels)

@@ -2,11 +2,9 @@
 
 On CPUs without native bfloat16 the U-Net is most of a stylized frame's time, and on large frames ONNX
 Runtime's convolutions (MLAS, blocked NCHWc layout, activation fused into the convolution) run it faster
-than torch's oneDNN in float32: the viewer's 768x512 frame (784x528 with its margins) took 840 ms on one
-AVX2 thread against torch's 1116 ms with version 7's U-Net (width 96), 452 against 605 ms on two, and
-449 against 530 ms, 283 against 320 ms with version 8's (width 64), the same outputs within ~1e-6; on
-small frames torch is faster (a 256-px preview 95 against 88 ms, version 7), so ``decoder_runtime="auto"`` picks by
-the frame's size (:func:`prefers_onnx`; ``benchmarks/bench_decoder_runtime.py``).
+than torch's oneDNN in float32, with the same outputs within ~1e-6; on small frames torch is faster (its
+per-call overhead is lower), so ``decoder_runtime="auto"`` picks by the frame's size (:func:`prefers_onnx`;
+``bench speed`` measures both).
 
 **The graph** is written here, node by node, from the :class:`~.decoder.UNetDecoder`'s weights with
 ``onnx.helper`` (no tracing: the layout is the decoder's own, see its module docstring):
@@ -23,9 +21,8 @@ caller polls ``should_stop`` and returns at once when it says stop, and sets ``R
 which ONNX Runtime checks before each node: the abandoned run ends within one node. So that no node runs
 long, a convolution of more than :data:`NODE_MACS_PER_PIXEL` multiply-adds per pixel of the padded
 frame is written as convolutions over groups of output channels, concatenated (the same values), in
-groups of multiples of 8 channels (the AVX2 block of MLAS's NCHWc kernels); finer groups cost more than
-they save (at 784x528 on one thread: 716 ms unsplit, 725 ms with the widest layer in 2 nodes, 855 and
-996 ms with limits of 8,000 and 3,500 MACs per pixel).
+groups of multiples of 8 channels (the AVX2 block of MLAS's NCHWc kernels); the limit is as high as it
+can be while a stop stays prompt, since finer groups re-read the input once per group.
 """
 
 from __future__ import annotations
@@ -318,7 +315,7 @@ def decode_threads() -> int:
 def prefers_onnx(pixels: int) -> bool:
     """Whether ONNX Runtime decodes a frame of ``pixels`` (padded) faster than torch on this thread: where
     :func:`onnx_threads` gives it more threads than torch has, always (two ONNX Runtime threads beat one
-    torch thread at every size measured: 57 against 88 ms at 264x180); else from
+    torch thread at every frame size); else from
     :data:`AUTO_PIXELS_PER_THREAD` pixels per thread."""
     threads = decode_threads()
     return threads > torch.get_num_threads() or pixels >= AUTO_PIXELS_PER_THREAD * threads

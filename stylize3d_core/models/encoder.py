@@ -159,7 +159,7 @@ def neighbour_max(features: torch.Tensor, neighbour_idx: torch.Tensor) -> torch.
 def _compiled_max(features: torch.Tensor, neighbour_idx: torch.Tensor) -> Optional[torch.Tensor]:
     """:func:`neighbour_max` at inference by the models' compiled kernel, in parts of the rows on the pool's
     threads: the same values (a max is exact), one read of each neighbour's row and no (M, C) buffers per
-    column (the 1 MP sample's encoding 0.20 -> 0.15 s); None where it does not apply (no Numba, not
+    column; None where it does not apply (no Numba, not
     float32 on the CPU, an index out of range: the checked lines then say so)."""
     kernels = _threads.compiled(__package__ + "._kernels")
     if kernels is None or features.dtype != torch.float32 or features.device.type != "cpu":

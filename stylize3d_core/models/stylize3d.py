@@ -134,8 +134,7 @@ class ModelConfig:
     @classmethod
     def lite(cls) -> "ModelConfig":
         """CPU configuration: encoder 32/64/128, AdaAttN 128 (q/k 64), 32 raster channels + the RGB detail
-        path with its colour transform and texture residual, decoder width 48 (96 until version 8 of the model, 64
-        in version 8)."""
+        path with its colour transform and texture residual, decoder width 48 (:meth:`DecoderConfig.lite`)."""
         return cls()
 
     @classmethod

@@ -120,11 +120,9 @@ class GridKNN:
     the k-th found, so the answer is exact (the k nearest, nearest first; among equidistant points the
     first one found). Squared distances are float32, summed as ``dx*dx + dy*dy + dz*dz``.
 
-    Measured against Open3D's k-d tree on this 2-core machine (both on two threads): the 1 MP sample's
-    geometry (encoder levels of 300k / 75k / 19k points among themselves, k = 16, and the 1.7M points'
-    3-NN among the coarsest level) 0.94-1.0 s instead of 1.36-1.57 s, the 3-NN 0.45 -> 0.18 s;
-    ``benchmarks/bench_points.py`` (synthetic clouds): the k = 16 search 1.1-1.25x, the 3-NN 1.7-1.8x
-    faster. Queries run on the pool's threads without the GIL (Open3D's search holds it).
+    It is faster than Open3D's k-d tree for these queries (``benchmarks/bench_points.py`` compares the
+    two), most of all for the 3-NN of many points among few: queries run on the pool's threads without
+    the GIL, where Open3D's search holds it.
 
     Args:
         source: (N, 3) float32 C-contiguous finite points, N >= 1 (validated by the caller).

@@ -60,8 +60,8 @@ indices per point). Cost is linear in N and H*W.
 
 Compiled path: inference with bilinear splats at supersample 1 (no point sizes, soft edges or
 coverage blending), float32 on the CPU, runs in :mod:`~stylize3d_core.render.rasterize_fast`
-(Numba kernels, the same taps and tests, sums up to float rounding; every point of the 1 MP sample
-into 512x342: ~430 -> ~100 ms);
+(Numba kernels, the same taps and tests, sums up to float rounding; several times faster:
+``bench speed`` compares the two through ``RasterSettings.backend``);
 everything else, and every call where Numba is missing, takes the tensor path below.
 
 Interruptible rasterization (``should_stop=``, e.g. the viewer's full frames):

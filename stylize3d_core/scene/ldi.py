@@ -183,12 +183,10 @@ class LDISettings:
     planes to the same disparity; those sources (and any other on that surface) are blended by
     inverse squared distance, depth and colour. A card hiding the crease where a ground meets a
     wall then has the ground behind it, continued from its sides, not the wall continued down from
-    above the card (the analytic ground scene: +3-5 dB on the disoccluded pixels). Elsewhere
-    (no agreeing pair, or the agreeing surface is the nearest source's own) it is ``"plane"``.
-    (Taking the *nearest* of the four continued planes, the first version of this rule, opened
-    holes on estimated depth: 0.5-1 % at the photo range's corners, a receding table's plane
-    continued from its near side came out in front of the table beside the saucer, and a hidden
-    layer in front of the background beside it tears from it.) ``"plane"``: the local plane of
+    above the card. Elsewhere (no agreeing pair, or the agreeing surface is the nearest source's
+    own) it is ``"plane"``. (The *nearest* of the four continued planes would not do: on estimated
+    depth a receding table's plane continued from its near side comes out in front of the table,
+    and a hidden layer in front of the background beside it tears from it.) ``"plane"``: the local plane of
     the nearest background source continued (a linear fit of the disparity ``1/z`` over
     ``fit_sigma``, which is affine on a plane), so a ground plane's hidden part stays on the
     ground; ``"nearest"``: the disparity of the nearest background source (flat behind every
@@ -216,8 +214,7 @@ class LDISettings:
     foreground's colour, an opacity (``LDI.alpha``) and a position moved inwards by the part it does not
     cover (``LDI.offset``), shown over the hidden background by renderers that blend coverage (the plain
     renderer). Its silhouette then moves with sub-pixel accuracy instead of as whole pixels of mixed
-    colour: on the analytic card scene against an 8 x 8-ray truth, 29.1 -> 30.4 dB on what a vertical move
-    uncovers, 49.0 -> 54.4 dB on what the photo saw. False: every layer-0 point opaque at its pixel's centre."""
+    colour (``tests/scene/test_novel_view_analytic.py`` measures it against a ray-cast truth). False: every layer-0 point opaque at its pixel's centre."""
 
     def __post_init__(self) -> None:
         check_range(self.disparity_jump, "disparity_jump", 0.0, 1.0, inclusive=False)
@@ -434,10 +431,9 @@ class _Coverage(NamedTuple):
 
 
 _DEPTH_SIGMA = 1.0
-"""Smoothing (pixels) of the hidden layer's continued depth: the seams between sources only. It was
-``band / 8`` (1-4 px), which blurred the crease of a ground meeting a wall behind a card over rows
-whose colours differ: the hidden points near the crease came out between the two planes and showed
-the rows beside theirs from a moved camera (the slanted ground's ken-burns corner 28.6 -> 33.4 dB)."""
+"""Smoothing (pixels) of the hidden layer's continued depth: the seams between sources only. Wider
+smoothing would blur the crease of a ground meeting a wall behind a card: the hidden points near the
+crease would come out between the two planes and show the rows beside theirs from a moved camera."""
 
 _DEPTH_RIDGE = 0.25
 _COLOUR_RIDGE = 0.02
