@@ -49,6 +49,10 @@ from typing import NamedTuple, Optional, Sequence, Tuple
 from stylize3d_core.checks import check_range
 from stylize3d_core.errors import InputError
 
+REST_DELAY_S = 0.1
+"""How long the camera must rest before the full frame is rendered (``PreviewSettings.rest_delay_s``): long
+enough that the pauses within one drag do not start a full frame, short enough not to feel like a wait."""
+
 
 class RenderPhase(enum.Enum):
     """The states of :class:`RenderStateMachine` (see the module docstring)."""
@@ -124,7 +128,7 @@ class RenderStateMachine:
             ``(1.0,)``: one level); a new value takes effect at the next change.
     """
 
-    def __init__(self, rest_delay_s: float = 0.15, hold_delay_s: float = 0.5,
+    def __init__(self, rest_delay_s: float = REST_DELAY_S, hold_delay_s: float = 0.5,
                  levels: Sequence[float] = (1.0,)) -> None:
         self.rest_delay_s = check_range(rest_delay_s, "rest_delay_s", 0.0, 10.0)
         self.hold_delay_s = check_range(hold_delay_s, "hold_delay_s", self.rest_delay_s, 10.0)

@@ -40,6 +40,7 @@ from stylize3d_core.pipeline import PhotoSpec
 from stylize3d_core.render.plain import frame_size
 
 from .orbit import HOME, OrbitLimits, OrbitPose, OrbitScene, clamp_pose, pose_camera, relative_to
+from .render_state import REST_DELAY_S
 
 ExportFormat = Literal["mp4", "gif", "png"]
 EXPORT_SUFFIX = {"mp4": ".mp4", "gif": ".gif", "png": ""}
@@ -92,7 +93,8 @@ class PreviewSettings:
         target_preview_s: time budget of rendering one preview frame. Default 0.035: with the
             hand-over to the GUI thread, a frame every ~1/24 s while dragging (>= 24 fps where the
             display keeps up).
-        rest_delay_s: the camera must rest this long before the full frame is rendered. Default 0.1.
+        rest_delay_s: the camera must rest this long before the full frame is rendered. Default
+            :data:`~app.viewer.render_state.REST_DELAY_S`.
         full_budget_s: seconds from the rest to a sharp frame: a full frame slower than this (less the
             rest delay) is rendered progressively, a smaller level first, as large as fits
             (:func:`~app.viewer.render_state.refine_levels`). Default 0.5.
@@ -103,7 +105,7 @@ class PreviewSettings:
     max_preview_long_side: int = 384
     full_long_side: int = 768
     target_preview_s: float = 0.035
-    rest_delay_s: float = 0.1
+    rest_delay_s: float = REST_DELAY_S
     full_budget_s: float = 0.5
 
     def __post_init__(self) -> None:
