@@ -36,7 +36,7 @@ def _add_render(sub: "argparse._SubParsersAction") -> None:
 
 
 def _add_training(sub: "argparse._SubParsersAction") -> None:
-    from stylize3d_core.train.trainer import LR_SCHEDULES, TrainConfig
+    from stylize3d_core.train.trainer import TrainConfig
 
     d = TrainConfig()
     p = sub.add_parser("prepare-data", help="generate training samples (pseudo views and procedural scenes)")
@@ -58,7 +58,7 @@ def _add_training(sub: "argparse._SubParsersAction") -> None:
                         "(split by stylize3d_core/train/real_images.py)")
     p = sub.add_parser("prepare-teacher", help="stage 2: bake the 2D network's stylization of every training "
                                                "sample onto its points (consistent stylized targets)")
-    p.add_argument("--data", default=d.data_dir + "/train", help="training samples (default runs/data/train)")
+    p.add_argument("--data", default=d.data_dir, help=f"training samples (default {d.data_dir})")
     p.add_argument("--styles", default=d.styles_dir, help=f"style bank (default {d.styles_dir})")
     p.add_argument("--out", default="runs/teacher", help="folder (default runs/teacher)")
     p.add_argument("--per-sample", type=int, default=1, help="styles per sample (default 1)")
@@ -67,35 +67,9 @@ def _add_training(sub: "argparse._SubParsersAction") -> None:
                        description="Train the stylization model. Runs resume from the checkpoint in --out. "
                                    "For several GPUs: torchrun --nproc_per_node=N -m app.cli train ...")
     p.add_argument("--stage", type=int, choices=(1, 2), required=True)
-    p.add_argument("--config", choices=("lite", "paper"), default=d.model, help=f"model size (default {d.model})")
-    p.add_argument("--data", default=d.data_dir + "/train", help="training samples (default runs/data/train)")
-    p.add_argument("--styles", default=d.styles_dir, help=f"style bank for stage 2 (default {d.styles_dir})")
-    p.add_argument("--out", default=d.out_dir, help=f"run folder (default {d.out_dir})")
-    p.add_argument("--init", default=None, help="checkpoint to start from (stage 2: the stage-1 model)")
-    p.add_argument("--init-stylizer", default=None,
-                   help="stage 2: take the stylizer's initial weights from this checkpoint (an earlier stage-2 run)")
-    p.add_argument("--iterations", type=int, default=d.iterations, help=f"total steps (default {d.iterations})")
-    p.add_argument("--batch-size", type=int, default=d.batch_size, help=f"samples per step (default {d.batch_size})")
-    p.add_argument("--lr", type=float, default=d.lr, help=f"Adam learning rate (default {d.lr:g})")
-    p.add_argument("--lr-schedule", choices=LR_SCHEDULES, default=d.lr_schedule,
-                   help="constant, or cosine decay to 0 at --iterations (default constant)")
-    p.add_argument("--hours", type=float, default=None, help="stop (with a checkpoint) after this many hours")
-    p.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every)
-    p.add_argument("--log-every", type=int, default=d.log_every)
-    p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
-    p.add_argument("--seed", type=int, default=d.seed)
-    p.add_argument("--recon-fraction", type=float, default=d.recon_fraction,
-                   help=f"stage 2: share of steps that train strength 0 with the stage-1 loss "
-                        f"(default {d.recon_fraction})")
+    add_options(p, TrainConfig)  # every TrainConfig field with its help and default, but the four below
     p.add_argument("--weight", action="append", default=[], metavar="NAME=VALUE",
                    help="override a loss weight (LossWeights field, e.g. colour=0); repeatable")
-    p.add_argument("--teacher", default=None, help="stage 2: a prepare-teacher folder for --data (default: none)")
-    p.add_argument("--teacher-fraction", type=float, default=d.teacher_fraction,
-                   help=f"stage 2: share of stylized samples that learn from their teacher "
-                        f"(default {d.teacher_fraction})")
-    p.add_argument("--style-prior", action="store_true",
-                   help="stage 2: add the 2D style prior to the --init model (its detail path carries the 2D "
-                        "network's painting of the points; needs --teacher)")
     p.add_argument("--style-stages", default=",".join(map(str, d.style_stages)), metavar="S,S,...",
                    help="stage 2: EfficientNet stages (0-4) of the global style loss "
                         f"(default {','.join(map(str, d.style_stages))})")
@@ -235,15 +209,8 @@ def _stages(text: str):
 def _train(args: argparse.Namespace) -> int:
     from stylize3d_core.train.trainer import TrainConfig, train
 
-    config = TrainConfig(
-        stage=args.stage, model=args.config, data_dir=args.data, styles_dir=args.styles, out_dir=args.out,
-        iterations=args.iterations, batch_size=args.batch_size, lr=args.lr, lr_schedule=args.lr_schedule,
-        checkpoint_every=args.checkpoint_every, log_every=args.log_every,
-        max_hours=args.hours, init=args.init, init_stylizer=args.init_stylizer, seed=args.seed,
-        threads=args.threads, weights=_loss_weights(args.weight), recon_fraction=args.recon_fraction,
-        teacher_dir=args.teacher, teacher_fraction=args.teacher_fraction, style_prior=args.style_prior,
-        style_stages=_stages(args.style_stages), style_crop=tuple(args.style_crop),
-    )
+    config = from_args(TrainConfig, args, stage=args.stage, weights=_loss_weights(args.weight),
+                       style_stages=_stages(args.style_stages), style_crop=tuple(args.style_crop))
     path = train(config, log=lambda msg: print(f"{PROG}: {msg}", file=sys.stderr, flush=True))
     print(f"{PROG}: checkpoint {path}", file=sys.stderr)
     return 0

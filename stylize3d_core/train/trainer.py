@@ -55,6 +55,7 @@ from ..models.style_features import StyleEncoder
 from ..models.stylize3d import (ConfigName, ModelConfig, Stylize3DModel, add_colour_transform, add_detail_path,
                                 add_style_prior,
                                 add_texture_residual)
+from ..options import option
 from ..render.reproject import pairwise_consistency, sample_view
 from .cache import TrainDataset
 from .data import TrainSample, from_u8
@@ -114,7 +115,7 @@ class TrainConfig:
     Attributes:
         stage: 1 (view synthesis) or 2 (stylization; needs ``init`` or a stage-1 checkpoint in ``out_dir``).
         model: "lite" or "paper" (see :class:`ModelConfig`).
-        data_dir: training samples written by ``stylize3d prepare-data``.
+        data_dir: training samples written by ``stylize3d prepare-data`` (its ``train/`` folder).
         styles_dir: style bank (stage 2) written by ``stylize3d prepare-styles``.
         out_dir: the run folder (checkpoints, state, logs).
         iterations: total optimizer steps of the stage (public code: 20k).
@@ -152,30 +153,44 @@ class TrainConfig:
             frames with the style at up to 512 pixels (2x).
     """
 
-    stage: int = 1
-    model: ConfigName = "lite"
-    data_dir: str = "runs/data"
-    styles_dir: str = "runs/styles"
-    out_dir: str = "runs/train"
-    iterations: int = 20000
-    batch_size: int = 8
-    lr: float = 1e-4
-    lr_schedule: str = "constant"
-    weights: LossWeights = LossWeights()
-    consistency_points: int = 4096
-    recon_fraction: float = 0.2
-    checkpoint_every: int = 100
-    log_every: int = 10
-    max_hours: Optional[float] = None
-    init: Optional[str] = None
-    init_stylizer: Optional[str] = None
-    seed: int = 0
-    threads: Optional[int] = None
-    teacher_dir: Optional[str] = None
-    teacher_fraction: float = 0.7
-    style_prior: bool = False
-    style_stages: Tuple[int, ...] = StylizationLossConfig.style_stages
-    style_crop: Tuple[float, float] = (0.5, 1.0)
+    stage: int = option(1, help="1 (view synthesis) or 2 (stylization)", cli=False)
+    model: ConfigName = option("lite", help="model size", flags=("--config",))
+    data_dir: str = option("runs/data/train", help="training samples (written by stylize3d prepare-data)",
+                           flags=("--data",), metavar="DIR")
+    styles_dir: str = option("runs/styles", help="style bank for stage 2", flags=("--styles",), metavar="DIR")
+    out_dir: str = option("runs/train", help="run folder; a run resumes from its checkpoint", flags=("--out",),
+                          metavar="DIR")
+    iterations: int = option(20000, help="total steps", low=1, high=1e9)
+    batch_size: int = option(8, help="samples per step", low=1, high=1e9)
+    lr: float = option(1e-4, help="Adam learning rate")
+    lr_schedule: str = option("constant", help="constant, or cosine decay to 0 at --iterations",
+                              choices=LR_SCHEDULES)
+    weights: LossWeights = option(default_factory=LossWeights, help="loss weights", cli=False)
+    consistency_points: int = option(4096, help="points per sample of the consistency loss", low=1, high=1e9)
+    recon_fraction: float = option(0.2, help="stage 2: share of steps that train strength 0 with the stage-1 "
+                                             "loss", low=0.0, high=1.0)
+    checkpoint_every: int = option(100, help="write the checkpoint every this many steps", low=1, high=1e9)
+    log_every: int = option(10, help="log the losses every this many steps", low=1, high=1e9)
+    max_hours: Optional[float] = option(None, help="stop (with a checkpoint) after this many hours",
+                                        flags=("--hours",))
+    init: Optional[str] = option(None, help="checkpoint to start from (stage 2: the stage-1 model)",
+                                 metavar="CHECKPOINT")
+    init_stylizer: Optional[str] = option(None, help="stage 2: take the stylizer's initial weights from this "
+                                                     "checkpoint (an earlier stage-2 run)", metavar="CHECKPOINT")
+    seed: int = option(0, help="base seed (sample order, style choice, consistency points)")
+    threads: Optional[int] = option(None, help="torch CPU threads (default: torch's choice)")
+    teacher_dir: Optional[str] = option(None, help="stage 2: a prepare-teacher folder for --data",
+                                        flags=("--teacher",), metavar="DIR")
+    teacher_fraction: float = option(0.7, help="stage 2: share of stylized samples that learn from their "
+                                               "teacher", low=0.0, high=1.0)
+    style_prior: bool = option(False, help="stage 2: add the 2D style prior to the --init model (its detail "
+                                           "path carries the 2D network's painting of the points; needs "
+                                           "--teacher)")
+    style_stages: Tuple[int, ...] = option(StylizationLossConfig.style_stages, cli=False,
+                                           help="stage 2: EfficientNet stages (0-4) of the global style loss")
+    style_crop: Tuple[float, float] = option((0.5, 1.0), cli=False,
+                                             help="stage 2: side of the random style crops as a fraction of "
+                                                  "the style's short side")
 
     def __post_init__(self) -> None:
         if self.stage not in (1, 2):

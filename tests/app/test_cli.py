@@ -243,3 +243,25 @@ def test_train_style_stages_are_checked(capsys):
         assert words in capsys.readouterr().err
     assert main(["train", "--stage", "2", "--style-crop", "0.6", "0.5"]) == 2
     assert "style_crop" in capsys.readouterr().err
+
+
+def test_the_train_command_line_is_derived_from_trainconfig():
+    """Every TrainConfig field is an option with the config's own default (written once, in the field)."""
+    import argparse
+    import dataclasses
+
+    from app.cli import build_parser
+    from stylize3d_core.train.trainer import TrainConfig
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices["train"]
+    args = sub.parse_args(["--stage", "1"])
+    d = TrainConfig()
+    for f in dataclasses.fields(TrainConfig):
+        if f.name in ("stage", "weights", "style_stages", "style_crop"):
+            continue
+        assert getattr(args, f.name) == getattr(d, f.name), f.name
+    args = sub.parse_args(["--stage", "2", "--data", "d", "--hours", "0.5", "--lr-schedule", "cosine", "--teacher", "t",
+                           "--style-prior"])
+    assert (args.data_dir, args.max_hours, args.lr_schedule, args.teacher_dir, args.style_prior) == \
+        ("d", 0.5, "cosine", "t", True)
