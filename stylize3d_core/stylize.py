@@ -78,10 +78,6 @@ class StylizeSettings:
         final_points_per_pixel: None (default): full frames rasterize every point. A number: full frames
             keep about this many points per output (super)pixel, as previews do (a prefix of the point
             order), where more would land on each pixel (``bench speed`` measures the error).
-        decode_scale: 1 (default), or s = 2..8: full frames decode split-resolution (models with the colour
-            transform; ``models/decoder.py``): the frame is rasterized once, the U-Net decodes its features
-            pooled to 1/s of the frame's size per side, and recolours the full-size detail colours.
-        preview_decode_scale: the same for previews (default 1).
         match_palette: True (default): after the model, one colour matrix, the same for every view, brings
             the frames' L*a*b* statistics to the style's (by the strength; the frames' lightness contrast
             kept, within a few percent), fitted once per photo, style and strength on a small render of the photo's own
@@ -101,7 +97,7 @@ class StylizeSettings:
             The U-Net's zero padding makes its outermost ~8 pixels differ from what it decodes inside a
             frame (a visible coloured rim); with the margin, the frame's edge is decoded as its inside is,
             for the few percent more pixels the margin adds. Rounded up to a multiple of the
-            decoder's stride (at split-resolution decoding, times the decode scale), so the frame keeps the
+            decoder's stride, so the frame keeps the
             decoder's grid phase.
         preview_border_margin: the same for previews (default 8, as full frames: the rim is as wide at any
             size, so it covers more of a small preview; with the full frame's margin a preview decodes its
@@ -116,8 +112,6 @@ class StylizeSettings:
     preview_points_per_pixel: float = 5.0
     seed: int = 0
     final_points_per_pixel: Optional[float] = None
-    decode_scale: int = 1
-    preview_decode_scale: int = 1
     match_palette: bool = True
     bfloat16: Optional[bool] = None
     decoder_runtime: str = "auto"
@@ -128,8 +122,7 @@ class StylizeSettings:
 
     def __post_init__(self) -> None:
         StylePriorSettings(size=self.prior_size)  # validates it
-        for name, lo, hi, unit in (("border_margin", 0, 64, " (pixels)"), ("preview_border_margin", 0, 64, " (pixels)"),
-                                   ("decode_scale", 1, 8, ""), ("preview_decode_scale", 1, 8, "")):
+        for name, lo, hi, unit in (("border_margin", 0, 64, " (pixels)"), ("preview_border_margin", 0, 64, " (pixels)")):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
                 raise InputError(name, f"must be an integer from {lo} to {hi}{unit}, got {value!r}")
@@ -493,7 +486,7 @@ class Stylized3DPhoto:
         instance) fits again."""
         st = self.settings
         key = (height, width, bool(preview), st.decode_bfloat16) + (
-            (st.preview_points_per_pixel, st.preview_decode_scale, st.preview_border_margin) if preview
+            (st.preview_points_per_pixel, st.preview_border_margin) if preview
             else (st.border_margin,))
         pal = self._palettes.get(key)
         if pal is not None:
@@ -546,19 +539,15 @@ class Stylized3DPhoto:
         n = self.num_points
         st = self.settings
         if every_point:
-            ss, scale, per_pixel, margin = 1, 1, None, st.border_margin
+            ss, per_pixel, margin = 1, None, st.border_margin
         elif preview:
-            ss, scale, per_pixel, margin = (1, st.preview_decode_scale, st.preview_points_per_pixel,
-                                            st.preview_border_margin)
+            ss, per_pixel, margin = 1, st.preview_points_per_pixel, st.preview_border_margin
         else:
-            ss, scale, per_pixel, margin = st.supersample, st.decode_scale, st.final_points_per_pixel, st.border_margin
-        if not self.model.config.decoder.transform_channels:
-            scale = 1  # split-resolution decoding needs the colour transform: full-size decoding
-        camera, m = _with_margin(camera, height, margin, (2 ** self.model.config.decoder.levels) * scale)
+            ss, per_pixel, margin = st.supersample, st.final_points_per_pixel, st.border_margin
+        camera, m = _with_margin(camera, height, margin, 2 ** self.model.config.decoder.levels)
         keep = n if per_pixel is None else self._strata.prefix(
             preview_point_count(n, (height + 2 * m) * ss, (width + 2 * m) * ss, per_pixel))
-        split = {} if scale == 1 else {"decode_scale": scale}
-        decoded = -(-(height + 2 * m) // scale) * -(-(width + 2 * m) // scale)  # the U-Net's pixels
+        decoded = (height + 2 * m) * (width + 2 * m)  # the U-Net's pixels
         runtime = decoder_onnx.onnx_unet(self.model.decoder) if st.decode_onnx(decoded) else None
         with torch.inference_mode():
             if should_stop is not None and should_stop():
@@ -566,7 +555,7 @@ class Stylized3DPhoto:
             rgb, _ = self.model.render_view(self._dense[:keep], self._xyz[:keep], camera, height + 2 * m,
                                             width + 2 * m, supersample=ss, should_stop=should_stop,
                                             bfloat16=st.decode_bfloat16, features_finite=True, runtime=runtime,
-                                            raster_backend=st.rasterizer, **split)
+                                            raster_backend=st.rasterizer)
             if m:
                 rgb = rgb[..., m : m + height, m : m + width]
             return torch.nan_to_num(rgb.float(), nan=0.0).clamp_(0.0, 1.0)  # float32 after a bfloat16 autocast

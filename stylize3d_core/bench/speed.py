@@ -2,9 +2,7 @@
 
 The reference is the full-quality float32 render: every point, supersample 1,
 the preset's frame size, torch's default threads, the decoder's channels-last
-layout, full-size decoding. Each variant changes one knob (point budget, render resolution,
-split-resolution decoding (``StylizeSettings.decode_scale``: the U-Net at 1/2 or 1/4 per side, the
-detail colours at full size), supersampling, bfloat16 decoding (``StylizeSettings.bfloat16``; the
+layout. Each variant changes one knob (point budget, render resolution, supersampling, bfloat16 decoding (``StylizeSettings.bfloat16``; the
 reference is float32) or a bfloat16 autocast of the style CNN, the decoder's memory layout, the
 rasterizer's tensor path instead of its compiled one, threads) and is compared with the reference on the same
 cameras: PSNR and the EfficientNet perceptual distance
@@ -79,7 +77,6 @@ class Variant:
     channels_first: bool = False  # the decoder in NCHW (the reference is channels-last, DecoderConfig's default)
     threads: Optional[int] = None
     slow: bool = False  # timed once without a warm-up (bfloat16 emulated in software is ~10x slower)
-    decode_scale: int = 1  # split-resolution decoding: the U-Net at 1/decode_scale per side (final and preview)
     final_points_per_pixel: Optional[float] = None  # StylizeSettings.final_points_per_pixel of full frames
     tensor_rasterizer: bool = False  # the rasterizer's tensor path instead of its compiled one (rasterize_fast)
     runtime: str = "auto"  # StylizeSettings.decoder_runtime (the reference: ONNX Runtime where it imports)
@@ -102,12 +99,6 @@ def variants(quick: bool) -> List[Variant]:
     out += [Variant(f"preview {p:g} pts/px", "point budget", preview_points_per_pixel=p)
             for p in ((1.0,) if quick else (1.0, 2.0, 3.0, 6.0))]
     out += [Variant(f"render at {s:g}x, upscaled", "resolution", scale=s) for s in ((0.5,) if quick else (0.5, 0.75))]
-    out += [Variant("decode at 1/2, colours at full size", "decode scale", decode_scale=2)]
-    if not quick:
-        out += [Variant("decode at 1/2, 6 pts/px", "decode scale", decode_scale=2, final_points_per_pixel=6.0),
-                Variant("decode at 1/4, colours at full size", "decode scale", decode_scale=4),
-                Variant("preview 3 pts/px, decode at 1/2", "decode scale", preview_points_per_pixel=3.0,
-                        decode_scale=2)]
     out += [Variant("supersample 2", "supersampling", supersample=2)]
     if quick:
         out += [Variant("bfloat16 decoder + style CNN", "bfloat16", bf16_decoder=True, bf16_style=True)]
@@ -167,7 +158,7 @@ class SpeedScene:
     instance: Optional[object] = None
 
     @contextlib.contextmanager
-    def stylized(self, supersample: int = 1, per_pixel: float = 3.0, decode_scale: int = 1,
+    def stylized(self, supersample: int = 1, per_pixel: float = 3.0,
                  final_per_pixel: Optional[float] = None, bfloat16: bool = False, runtime: str = "auto",
                  rasterizer: str = "auto"):
         """The one ``Stylized3DPhoto`` of the scene, with these settings while the context lasts (its
@@ -180,7 +171,6 @@ class SpeedScene:
         s = self.instance
         before = s.settings
         s.settings = replace(before, supersample=supersample, preview_points_per_pixel=per_pixel,
-                             decode_scale=decode_scale, preview_decode_scale=decode_scale,
                              final_points_per_pixel=final_per_pixel, bfloat16=bfloat16, decoder_runtime=runtime,
                              rasterizer=rasterizer)
         try:
@@ -232,7 +222,7 @@ class VariantRun:
         v = self.v
         self._stack = contextlib.ExitStack()
         self.s = self._stack.enter_context(self.scene.stylized(v.supersample, v.preview_points_per_pixel or 3.0,
-                                                               v.decode_scale, v.final_points_per_pixel,
+                                                               v.final_points_per_pixel,
                                                                v.bf16_decoder, v.runtime,
                                                                "tensor" if v.tensor_rasterizer else "auto"))
         self._stack.enter_context(torch_threads(v.threads))  # restored when the stack closes

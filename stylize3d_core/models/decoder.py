@@ -41,16 +41,6 @@ adds it to a trained model.
 The full-resolution layers are narrow (``width / 4`` channels for 2 levels);
 the ``width``-channel layers run at 1/2 and 1/4 resolution.
 
-**Split-resolution decoding** (``forward(..., detail=(d, m))``, ``StylizeSettings.decode_scale``):
-with the colour transform, a covered pixel's colour is mostly the rasterized detail colour ``d``; the
-U-Net's own output matters in holes and partly covered pixels, and ``A, b`` are a smooth field anyway.
-So the U-Net can run on the rasterized features pooled to a reduced size (h, w) (:func:`pool_features`:
-one rasterization at the output size, the mean of each block's covered pixels) while ``d`` and its
-coverage ``m`` stay at the output size (H, W): everything the U-Net outputs (``rgb``; the coefficients, already
-1 / 2**levels of its size) is upsampled bilinearly over the image's extent to (H, W), and the transform
-is applied there. With the shipped ``lite`` weights (``A = I, b = 0``) covered pixels are exactly the
-full-resolution render; only holes and their rims differ (``bench speed`` measures it).
-
 **Constant transform:** under ``torch.no_grad``/``inference_mode``, a head whose weights are all zero
 (the shipped ``lite`` checkpoint's) gives the same coefficients at every pixel, its bias: the head's
 convolution and the full-resolution upsampling of 12 channels are skipped (:func:`constant_transform`).
@@ -215,43 +205,6 @@ def supersample_pool(features: torch.Tensor, mask: torch.Tensor) -> Tuple[torch.
     coverage = F.avg_pool2d(mask, 2)  # (B, 1, H, W)
     summed = F.avg_pool2d(features * mask, 2)  # (B, C, H, W); exactly 0 where coverage is 0
     return summed / coverage.clamp_min(1e-6), coverage
-
-
-def pool_features(features: torch.Tensor, coverage: torch.Tensor, scale: int) -> Tuple[torch.Tensor, torch.Tensor]:
-    """Rasterized features at 1/``scale`` per side for split-resolution decoding: (B, C, H, W) (0 at holes),
-    coverage (B, 1, H, W) in {0, 1} -> (B, C, ceil(H / s), ceil(W / s)), mask (B, 1, ...) in {0, 1}.
-
-    Each block of s x s pixels (zero-padded at the bottom/right: holes) becomes the mean of its covered
-    pixels, and is covered when any of them is (as a raster of that size, where a point covers the
-    pixel it lands in); a block without any is a hole (features 0). The memory format is kept.
-    """
-    if scale == 1:
-        return features, coverage
-    features, coverage = pad_to_multiple(features, scale), pad_to_multiple(coverage, scale)
-    b, c, hp, wp = features.shape
-    h, w = hp // scale, wp // scale
-    summed = _block_sums(features.permute(0, 2, 3, 1), scale)  # (B, h, w, C); a view of channels-last memory
-    count = _block_sums(coverage.permute(0, 2, 3, 1), scale)  # (B, h, w, 1): covered pixels per block
-    pooled = (summed / count.clamp_min(1.0)).permute(0, 3, 1, 2)  # (B, C, h, w), channels-last
-    if not features.is_contiguous(memory_format=torch.channels_last) or c == 1:
-        pooled = pooled.contiguous()
-    return pooled, (count > 0).to(features.dtype).permute(0, 3, 1, 2).contiguous()
-
-
-def _block_sums(x: torch.Tensor, s: int) -> torch.Tensor:
-    """(B, H, W, C) -> (B, H / s, W / s, C): sums of s x s blocks, added row by row then column by column
-    (element-wise adds of strided slices: ~10x faster on CPU than ``avg_pool2d`` or a multi-axis ``sum``
-    of a channels-last image)."""
-    b, hp, wp, c = x.shape
-    rows = x.reshape(b, hp // s, s, wp, c)
-    acc = rows[:, :, 0] + rows[:, :, 1]  # (s >= 2) a new tensor: no copy of the first slice
-    for k in range(2, s):
-        acc += rows[:, :, k]
-    cols = acc.view(b, hp // s, wp // s, s, c)
-    out = cols[:, :, :, 0] + cols[:, :, :, 1]
-    for k in range(2, s):
-        out += cols[:, :, :, k]
-    return out
 
 
 TEXTURE_SCALE = 0.5
@@ -432,14 +385,6 @@ def _apply_constant_transform(rgb: torch.Tensor, colours: torch.Tensor, coverage
     return rgb.addcmul_(coverage, delta).clamp_(0.0, 1.0)  # rgb is the decoder's own new tensor
 
 
-def upsample_to(x: torch.Tensor, size: Tuple[int, int]) -> torch.Tensor:
-    """(B, C, h, w) -> (B, C, H, W), bilinear over the image's extent (``align_corners=False``): the pixel
-    grid of a frame rasterized at (h, w) over the same image extent (split-resolution decoding)."""
-    if tuple(x.shape[-2:]) == tuple(size):
-        return x
-    return F.interpolate(x, size=tuple(size), mode="bilinear", align_corners=False)
-
-
 class _Down(nn.Module):
     def __init__(self, c_in: int, c_out: int, slope: float) -> None:
         super().__init__()
@@ -511,14 +456,8 @@ class UNetDecoder(nn.Module):
                 check_finite(t, name)
 
     def forward(self, features: torch.Tensor, mask: torch.Tensor, should_stop: StopCheck = None, *,
-                detail: Optional[Tuple[torch.Tensor, torch.Tensor]] = None, bfloat16: bool = False,
-                runtime=None) -> torch.Tensor:
-        """``detail``: split-resolution decoding (see the module docstring): the detail colours
-        (B, 3, H, W) and their coverage (B, 1, H, W) at the output size, while ``features`` and ``mask``
-        come at a smaller size; the U-Net's outputs are upsampled to (H, W) and the colour transform
-        recolours these colours. Needs the colour transform (``transform_channels`` 3).
-
-        ``bfloat16``: decode under a CPU bfloat16 autocast (inference; see the module docstring);
+                bfloat16: bool = False, runtime=None) -> torch.Tensor:
+        """``bfloat16``: decode under a CPU bfloat16 autocast (inference; see the module docstring);
         the result is float32 either way.
 
         ``runtime``: the caller's choice of another runtime for the U-Net (inference, float32), any object
@@ -533,8 +472,6 @@ class UNetDecoder(nn.Module):
             raise InputError("runtime", "the ONNX Runtime U-Net is for float32 inference (under "
                                         "torch.inference_mode(), without bfloat16)")
         self._check(features, mask)
-        if detail is not None:
-            detail = self._check_detail(features, detail)
         mask = mask.to(features.dtype)
         if self.config.supersample:
             features, mask = supersample_pool(features, mask)
@@ -562,15 +499,6 @@ class UNetDecoder(nn.Module):
         texture = TEXTURE_SCALE * torch.tanh(y[:, 3:]) if self.config.texture_channels else None
         if self.transform is not None:
             _stop(should_stop)
-            if detail is not None:  # the U-Net's outputs at the decoding size, upsampled to the detail's
-                colours, mask = detail
-                out_size = tuple(colours.shape[-2:])
-                rgb = upsample_to(rgb, out_size)
-                if texture is not None:
-                    texture = upsample_to(texture, out_size)
-                if coefficients.shape[-2:] != (1, 1):
-                    coefficients = upsample_to(coefficients, padded)[..., :h, :w]
-                padded = out_size
             rgb = apply_colour_transform(rgb, colours, mask, coefficients, padded, texture)
         return rgb.contiguous()
 
@@ -601,19 +529,3 @@ class UNetDecoder(nn.Module):
                                           should_stop).to(features.dtype)
         return y, coefficients, padded
 
-    def _check_detail(self, features: torch.Tensor, detail) -> Tuple[torch.Tensor, torch.Tensor]:
-        if self.transform is None:
-            raise InputError("detail", "split-resolution decoding needs the colour transform (transform_channels 3)")
-        if self.config.supersample:
-            raise InputError("detail", "split-resolution decoding does not take a supersampling decoder")
-        colours, coverage = detail
-        b = features.shape[0]
-        if colours.dim() != 4 or tuple(colours.shape[:2]) != (b, self.config.transform_channels):
-            raise InputError("detail colours", f"expected shape ({b}, 3, H, W), got {tuple(colours.shape)}")
-        if tuple(coverage.shape) != (b, 1) + tuple(colours.shape[-2:]):
-            raise InputError("detail coverage", f"expected shape ({b}, 1, {colours.shape[-2]}, {colours.shape[-1]}), "
-                             f"got {tuple(coverage.shape)}")
-        for t, name in ((colours, "detail colours"), (coverage, "detail coverage")):
-            if not torch.isfinite(t.sum()):
-                check_finite(t, name)
-        return colours, coverage.to(features.dtype)

@@ -59,7 +59,7 @@ from ..points import interpolate
 from ..render.rasterize import Fragments, RasterSettings
 from ..render.rasterizer import PointRasterizer
 from .adaattn import AdaAttNConfig, AdaAttNStylizer, blend
-from .decoder import DecoderConfig, UNetDecoder, identity_transform, pool_features, zero_texture
+from .decoder import DecoderConfig, UNetDecoder, identity_transform, zero_texture
 from .encoder import Encoder, EncoderConfig
 from .scene_geometry import NeighbourhoodConfig, SceneGeometry, prepare_geometry
 
@@ -215,7 +215,7 @@ class Stylize3DModel(nn.Module):
     def render_view(
         self, dense: torch.Tensor, xyz: torch.Tensor, camera: Cameras, height: int, width: int,
         supersample: int = 1, should_stop: Optional[Callable[[], bool]] = None, *,
-        decode_scale: int = 1, bfloat16: bool = False, features_finite: bool = False, runtime=None,
+        bfloat16: bool = False, features_finite: bool = False, runtime=None,
         raster_backend: str = "auto",
     ) -> Tuple[torch.Tensor, Fragments]:
         """Decode one view: (3, H, W) RGB in (0, 1) and the rasterizer's fragments.
@@ -224,11 +224,6 @@ class Stylize3DModel(nn.Module):
         ``should_stop`` is checked between the rasterizer's chunks of points and
         between the decoder's layers and strips (``UNetDecoder.forward``); True
         stops with :class:`~stylize3d_core.errors.RenderInterrupted`.
-
-        ``decode_scale`` s > 1 (split-resolution decoding, models with the colour transform; see
-        ``models/decoder.py``): the view is rasterized once at (H, W); the U-Net decodes its features
-        pooled to (ceil(H / s), ceil(W / s)) (:func:`~stylize3d_core.models.decoder.pool_features`), and
-        its outputs, upsampled, recolour the full-size detail colours.
 
         ``bfloat16``: the decoder runs under a bfloat16 autocast (inference only; see
         ``UNetDecoder.forward``); the rasterizer stays float32 and the result is float32.
@@ -241,33 +236,12 @@ class Stylize3DModel(nn.Module):
 
         ``raster_backend``: :attr:`~stylize3d_core.render.rasterize.RasterSettings.backend`.
         """
-        if isinstance(decode_scale, bool) or not isinstance(decode_scale, int) or not 1 <= decode_scale <= 8:
-            raise InputError("decode_scale", f"must be an integer from 1 to 8, got {decode_scale!r}")
         settings = RasterSettings(height=int(height), width=int(width), supersample=supersample,
                                   backend=raster_backend)
-        if decode_scale > 1:
-            return self._render_split(dense, xyz, camera, settings, decode_scale, should_stop, bfloat16,
-                                      features_finite, runtime)
         frags = PointRasterizer(settings)(xyz, dense, camera, should_stop=should_stop, features_finite=features_finite)
         features = frags.image.unsqueeze(0)  # (1, Cr, H, W)
         mask = (~frags.hole).to(features.dtype)[None, None]  # (1, 1, H, W)
         rgb = self.decoder(features, mask, should_stop=should_stop, bfloat16=bfloat16, runtime=runtime)[0]  # (3, H, W)
-        return rgb, frags
-
-    def _render_split(self, dense: torch.Tensor, xyz: torch.Tensor, camera: Cameras, settings: RasterSettings,
-                      scale: int, should_stop, bfloat16: bool = False,
-                      features_finite: bool = False, runtime=None) -> Tuple[torch.Tensor, Fragments]:
-        """``render_view`` with split-resolution decoding (``decode_scale`` > 1)."""
-        d = self.config.decoder.transform_channels
-        if not d or self.config.decoder.supersample:
-            raise InputError("decode_scale", "split-resolution decoding needs a model with the colour transform "
-                             "(decoder.transform_channels 3) and without decoder supersampling")
-        frags = PointRasterizer(settings)(xyz, dense, camera, should_stop=should_stop, features_finite=features_finite)
-        image = frags.image.unsqueeze(0)  # (1, Cr + D, H, W), channels-last
-        coverage = (~frags.hole).to(image.dtype)[None, None]  # (1, 1, H, W)
-        features, mask = pool_features(image, coverage, scale)  # (1, Cr + D, h, w), (1, 1, h, w)
-        rgb = self.decoder(features, mask, should_stop=should_stop, detail=(image[:, -d:], coverage),
-                           bfloat16=bfloat16, runtime=runtime)[0]
         return rgb, frags
 
 

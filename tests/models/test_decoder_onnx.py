@@ -61,19 +61,6 @@ def test_onnx_unet_gives_the_torch_decoders_frames(kind, hw):
     assert torch.equal(out, stopped_never)
 
 
-def test_onnx_unet_in_split_resolution_decoding():
-    dec = _decoder()
-    feats, mask = _inputs(24, 36, 11)
-    small = torch.nn.functional.avg_pool2d(feats, 2)
-    small_mask = (torch.nn.functional.avg_pool2d(mask, 2) > 0).float()
-    rt = onnx_unet(dec)
-    with torch.inference_mode():
-        ref = dec(small, small_mask, detail=(feats[:, -3:], mask))
-        out = dec(small, small_mask, detail=(feats[:, -3:], mask), runtime=rt)
-    assert out.shape == (1, 3, 24, 36)
-    assert (out - ref).abs().max().item() <= TOL
-
-
 def test_the_graph_and_its_channel_groups(monkeypatch):
     dec = _decoder(width=32)
     model = unet_graph(dec)
