@@ -517,9 +517,3 @@ def _skips(out: Path, scene: SpeedScene, s, preset: SpeedPreset, cam, log: Log) 
         "differ, so the time difference is what the skipped step costs on this photo"])
     log("skips: " + ", ".join(f"{x['change']} {x['speedup']:.1f}x" for x in rows))
     return rows
-
-
-def _style_tensor(rgb: np.ndarray) -> torch.Tensor:
-    from ..stylize import style_tensor
-
-    return style_tensor(rgb)
