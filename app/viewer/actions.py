@@ -46,7 +46,7 @@ from .host import ViewerHost
 from .orbit import HOME
 from .session import NO_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE, ExportJob, StylizeInfo
 from .state import (
-    LOADED_PATH, ExportSettings, PhotoInfo, Playback, TrajectoryLimits, clamp_trajectory, export_destination,
+    LOADED_PATH, VideoExport, PhotoInfo, Playback, TrajectoryLimits, clamp_trajectory, export_destination,
     export_progress_text, fov_range, path_source, playback_frame, screenshot_size, shows_stylized,
     trajectory_cameras, trajectory_limits, view_camera,
 )
@@ -602,7 +602,7 @@ class ExportController(Controller):
         p = w.panel
         fmt = P.EXPORT_FORMATS[max(0, p.format.selected_index)][0]
         try:
-            e = ExportSettings(format=fmt, size=int(p.size.int_value), frames=int(p.frames.int_value),
+            e = VideoExport(format=fmt, size=int(p.size.int_value), frames=int(p.frames.int_value),
                                fps=float(p.fps.double_value))
         except InputError as err:
             w.show_error("export settings", err)

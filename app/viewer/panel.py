@@ -14,7 +14,7 @@ import open3d.visualization.gui as gui
 
 from stylize3d_core.geometry.trajectories import TrajectoryName
 
-from .state import ExportSettings, ViewState
+from .state import VideoExport, ViewState
 
 DEPTH_CHOICES: Tuple[Tuple[str, str], ...] = (
     ("auto", "auto (phone depth, else built-in prior)"),
@@ -279,7 +279,7 @@ class Panel:
         for _, label in EXPORT_FORMATS:
             self.format.add_item(label)
         export.add_child(self.format)
-        e: ExportSettings = state.export
+        e: VideoExport = state.export
         grid = gui.VGrid(2, 0.3 * em)
         self.size = _number(gui.NumberEdit.INT, e.size, 16, 4096)
         self.frames = _number(gui.NumberEdit.INT, e.frames, 1, 10000)

@@ -48,7 +48,7 @@ from typing import Any, Callable, Dict, List, Optional
 from stylize3d_core.errors import InputError
 
 from . import panel as P
-from .state import ExportSettings, shows_stylized, user_choices
+from .state import VideoExport, shows_stylized, user_choices
 from .window import ViewerWindow
 
 
@@ -219,7 +219,7 @@ class ScriptRunner:
     def op_set_export(self, **fields: Any) -> Dict[str, Any]:
         def apply() -> Dict[str, Any]:
             w = self.window
-            e = ExportSettings(**{**asdict(w.state.export), **fields})
+            e = VideoExport(**{**asdict(w.state.export), **fields})
             w.state = replace(w.state, export=e)
             return asdict(e)
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Dict, List, Literal, NamedTuple, Optional, Sequence, Tuple, get_args
 
@@ -36,7 +36,8 @@ from stylize3d_core.geometry.trajectories import (
     DEFAULT_XY, DEFAULT_Z, TrajectoryName, TrajectorySettings, make_trajectory,
 )
 from stylize3d_core.io.video import MAX_GIF_FPS
-from stylize3d_core.pipeline import PhotoSpec
+from stylize3d_core.options import option_info
+from stylize3d_core.pipeline import PhotoSpec, RenderJob
 from stylize3d_core.render.plain import frame_size
 
 from .orbit import HOME, OrbitLimits, OrbitPose, OrbitScene, clamp_pose, pose_camera, relative_to
@@ -52,30 +53,40 @@ LOADED_PATH = "camera path file"
 """Trajectory-picker entry for a camera path loaded from JSON."""
 
 
+_JOB = {f.name: f for f in fields(RenderJob)}
+
+
+def _job_range(name: str):
+    """(low, high) of the ``RenderJob`` option ``name``: the viewer's export accepts what the library does."""
+    info = option_info(_JOB[name])
+    return info.low, info.high
+
+
 @dataclass(frozen=True)
-class ExportSettings:
-    """What "Export" writes.
+class VideoExport:
+    """What the panel's Export button writes (the library's ``RenderJob`` writes it).
 
     Attributes:
         format: "mp4" (default, H.264), "gif", or "png" (a folder of frames).
-        size: long side of the frames in pixels (the photo's aspect). Default 512.
-        frames: number of frames of the trajectory. Default 90 (3 s at 30 fps, as the paper's code).
-        fps: frames per second. Default 30.
+        size: long side of the frames in pixels (the photo's aspect); ``RenderJob.size``'s default and range.
+        frames: number of frames of the trajectory; ``RenderJob.frames``'s default, at most
+            ``RenderJob.max_frames``'s default.
+        fps: frames per second; ``RenderJob.fps``'s default and range (a GIF: at most ``MAX_GIF_FPS``).
     """
 
     format: ExportFormat = "mp4"
-    size: int = 512
-    frames: int = 90
-    fps: float = 30.0
+    size: int = _JOB["size"].default
+    frames: int = _JOB["frames"].default
+    fps: float = _JOB["fps"].default
 
     def __post_init__(self) -> None:
         check_choice(self.format, "export format", get_args(ExportFormat))
-        if isinstance(self.size, bool) or int(self.size) != self.size or not 16 <= self.size <= 4096:
-            raise InputError("export size", f"must be an integer from 16 to 4096, got {self.size!r}")
-        if isinstance(self.frames, bool) or int(self.frames) != self.frames or not 1 <= self.frames <= 10000:
-            raise InputError("export frames", f"must be an integer from 1 to 10000, got {self.frames!r}")
-        top = MAX_GIF_FPS if self.format == "gif" else 240.0
-        check_range(self.fps, "export fps", 1.0, top)
+        for name, low, high in (("size", *_job_range("size")), ("frames", 1, _JOB["max_frames"].default)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or int(value) != value or not low <= value <= high:
+                raise InputError(f"export {name}", f"must be an integer from {low:g} to {high:g}, got {value!r}")
+        low, high = _job_range("fps")
+        check_range(self.fps, "export fps", low, MAX_GIF_FPS if self.format == "gif" else high)
 
 
 @dataclass(frozen=True)
@@ -214,7 +225,7 @@ class ViewState:
     use_loaded_path: bool = False
     keyframes: Optional[KeyframePath] = None
     use_keyframes: bool = False
-    export: ExportSettings = field(default_factory=ExportSettings)
+    export: VideoExport = field(default_factory=VideoExport)
     photo_info: Optional[PhotoInfo] = None
     stylize_available: bool = False
     loaded_path: Optional[CameraPath] = None

@@ -26,7 +26,7 @@ from app.viewer.actions import CameraPathController, ExportController
 from app.viewer.layers import ViewerLayers
 from app.viewer.orbit import HOME, OrbitPose, pose_camera
 from app.viewer.session import SAMPLE_PHOTO, SAMPLE_STYLE, ViewerSession
-from app.viewer.state import ExportSettings as ViewerExport, ViewState
+from app.viewer.state import VideoExport as ViewerExport, ViewState
 from stylize3d_core.errors import InputError
 from stylize3d_core.eval.multiview import procedural_views
 from stylize3d_core.export.camera_paths import camera_path_format, read_camera_path

@@ -9,7 +9,7 @@ import torch
 
 from app.viewer.orbit import HOME, OrbitPose, OrbitScene, cam_to_world
 from app.viewer.state import (
-    VIEWER_MAX_SIZE, ExportSettings, PhotoInfo, Playback, PreviewSettings, ViewState, choose_preview_long_side,
+    VIEWER_MAX_SIZE, VideoExport, PhotoInfo, Playback, PreviewSettings, ViewState, choose_preview_long_side,
     clamp_state_pose, clamp_trajectory, export_destination, fov_range, full_frame_size, playback_frame,
     preview_cost_model, resolve_open_path, shows_stylized, trajectory_cameras, trajectory_limits, user_choices,
     view_camera, view_fov,
@@ -25,7 +25,7 @@ SCENE = OrbitScene(centre_depth=0.7)
 
 def test_defaults_are_valid_and_bad_values_refused():
     s = ViewState()
-    assert s.pose == HOME and s.stylized and s.strength == 1.0 and s.export == ExportSettings()
+    assert s.pose == HOME and s.stylized and s.strength == 1.0 and s.export == VideoExport()
     with pytest.raises(InputError, match="strength"):
         ViewState(strength=1.5)
     with pytest.raises(InputError, match="trajectory"):
@@ -47,7 +47,7 @@ def test_defaults_are_valid_and_bad_values_refused():
 ])
 def test_bad_export_settings(kwargs, match):
     with pytest.raises(InputError, match=match):
-        ExportSettings(**kwargs)
+        VideoExport(**kwargs)
 
 
 def test_view_camera_and_fov():
@@ -129,7 +129,7 @@ def test_export_destination():
 
 
 def test_trajectory_cameras_follow_the_view():
-    s = ViewState(export=ExportSettings(frames=12), trajectory=TrajectorySettings(name="swing"))
+    s = ViewState(export=VideoExport(frames=12), trajectory=TrajectorySettings(name="swing"))
     cams = trajectory_cameras(s, SCENE, 50.0)
     ref = make_trajectory(TrajectorySettings(name="swing", n_frames=12, fov_y_deg=50.0))
     torch.testing.assert_close(cams.cam_to_world, ref.cam_to_world)
@@ -301,3 +301,14 @@ def test_status_line_leaves_unchanged_labels_alone():
     assert len(label.writes) == 3
     Panel.set_line(panel, label, "short")
     assert label.text == "short" and label.tooltip == "" and len(label.writes) == 5
+
+
+def test_the_viewer_export_takes_render_job_defaults_and_ranges():
+    from stylize3d_core.pipeline import RenderJob
+
+    job, e = RenderJob(), VideoExport()
+    assert (e.size, e.frames, e.fps) == (job.size, job.frames, job.fps)
+    VideoExport(size=16), VideoExport(size=4096), VideoExport(fps=240.0), VideoExport(frames=job.max_frames)
+    for bad in (dict(size=15), dict(size=4097), dict(fps=240.5), dict(frames=job.max_frames + 1)):
+        with pytest.raises(InputError):
+            VideoExport(**bad)
