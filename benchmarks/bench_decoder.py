@@ -18,13 +18,10 @@ machine) over ``--repeats`` runs, after one warm-up, under
 from __future__ import annotations
 
 import argparse
-import sys
-from pathlib import Path
 from typing import Callable, Tuple
 
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from stylize3d_core.eval.timing import median_and_min  # noqa: E402
 from stylize3d_core.models.adaattn import AdaAttNConfig, AdaAttNStylizer  # noqa: E402

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import sys
 import tempfile
 import time
 from dataclasses import replace
@@ -32,7 +31,6 @@ import numpy as np
 import torch
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 from stylize3d_core.models.checkpoint import load_checkpoint  # noqa: E402
 from stylize3d_core.models.decoder_onnx import OnnxUNet, onnx_unet  # noqa: E402

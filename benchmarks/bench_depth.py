@@ -20,7 +20,6 @@ over ``--repeats`` runs after one warm-up:
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 import warnings
 from pathlib import Path
@@ -29,7 +28,6 @@ from typing import Callable, Tuple
 import cv2
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from stylize3d_core.depth.onnx_model import PRESETS, OnnxDepthModel, OnnxSettings  # noqa: E402
 from stylize3d_core.depth.prior import estimate_prior  # noqa: E402

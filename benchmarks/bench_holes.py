@@ -27,14 +27,11 @@ from __future__ import annotations
 import argparse
 import ast
 import dataclasses
-import sys
 from pathlib import Path
 from typing import List, Tuple
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 from stylize3d_core.depth.sources import PriorDepth  # noqa: E402
 from stylize3d_core.geometry.camera import Cameras  # noqa: E402
@@ -45,7 +42,6 @@ from stylize3d_core.render.plain import PlainRenderer, PlainRenderSettings, fram
 from stylize3d_core.scene.ldi import LDISettings  # noqa: E402
 from stylize3d_core.scene.photo3d import Photo3D, Photo3DSettings  # noqa: E402
 
-sys.path.insert(1, str(ROOT / "benchmarks"))
 from photos import estimate_depth, test_photos  # noqa: E402
 
 def full_dolly(rng: CameraRange, centre_depth: float, near_depth: float) -> np.ndarray:

@@ -14,10 +14,7 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
-import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from stylize3d_core.bench.speed import FULL, Variant, measure_variants, psnr, speed_scene  # noqa: E402
 

@@ -23,7 +23,6 @@ from pathlib import Path
 import torch
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 from stylize3d_core.bench.quality import run_quality  # noqa: E402
 from stylize3d_core.bench.report import markdown_table  # noqa: E402

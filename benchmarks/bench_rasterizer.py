@@ -23,14 +23,11 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import statistics
-import sys
 import time
 
 import torch
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from stylize3d_core.eval.timing import median_and_min  # noqa: E402
 from stylize3d_core.geometry.camera import intrinsics_from_fov  # noqa: E402

@@ -12,17 +12,24 @@ This prints the same figures with the photo at ``--photo-samples`` and the truth
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tests" / "scene"))
 
-import test_novel_view_scenes as scenes  # noqa: E402  (the scenes, moves and camera of the test)
+
+def _load_test_module(path: Path):
+    """The test module at ``path`` (its scenes, moves and camera), loaded by file: tests are no package."""
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+scenes = _load_test_module(ROOT / "tests" / "scene" / "test_novel_view_scenes.py")
 
 from stylize3d_core.depth.types import DepthMap  # noqa: E402
 from stylize3d_core.geometry.camera import NEAR_DEPTH  # noqa: E402

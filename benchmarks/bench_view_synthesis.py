@@ -18,14 +18,12 @@ construction: that column measures the renderer, not the world).
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
 import torch
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 from stylize3d_core.eval.quality import plain_view_scores  # noqa: E402
 from stylize3d_core.eval.view_synthesis import KindScores, evaluate_view_synthesis  # noqa: E402

@@ -62,7 +62,6 @@ import argparse
 import json
 import os
 import statistics
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -70,7 +69,6 @@ from typing import Dict, List, Optional, Tuple
 
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's app and library
 
 from app.viewer.backend import BACKENDS, DEFAULT_BACKEND, backend_choice
 from app.viewer.orbit import OrbitPose, pose_camera

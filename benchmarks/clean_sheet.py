@@ -1,10 +1,10 @@
 """Before/after contact sheet of 3D photos seen from the edges of the camera range.
 
 Three steps (the "before" frames come from another checkout's library, e.g. the
-main branch before the change)::
+main branch before the change, put first on ``PYTHONPATH``)::
 
     .venv/bin/python benchmarks/clean_sheet.py render --out /tmp/after.npz
-    .venv/bin/python benchmarks/clean_sheet.py render --library /work/main --poses /tmp/after.npz --out /tmp/before.npz
+    PYTHONPATH=/path/to/main .venv/bin/python benchmarks/clean_sheet.py render --poses /tmp/after.npz --out /tmp/before.npz
     .venv/bin/python benchmarks/clean_sheet.py compose /tmp/before.npz /tmp/after.npz --out docs/clean_contact_sheet.png
 
 ``render`` builds each test photo's 3D photo (built-in depth prior) with the
@@ -20,8 +20,8 @@ Details a 256-px tile cannot show (a silhouette's sub-pixel position, a faint gr
 surface) need the photo's own size and a magnified crop::
 
     .venv/bin/python benchmarks/clean_sheet.py render --size 640 --photos coffee,astronaut --out /tmp/after.npz
-    .venv/bin/python benchmarks/clean_sheet.py render --size 640 --photos coffee,astronaut --library /work/main \
-        --poses /tmp/after.npz --out /tmp/before.npz
+    PYTHONPATH=/path/to/main .venv/bin/python benchmarks/clean_sheet.py render --size 640 \
+        --photos coffee,astronaut --poses /tmp/after.npz --out /tmp/before.npz
     .venv/bin/python benchmarks/clean_sheet.py zoom /tmp/before.npz /tmp/after.npz \
         --crop coffee:0:40,300,100 --crop astronaut:1:60,330,100 --out docs/clean_zoom.png
 
@@ -32,7 +32,6 @@ surface) need the photo's own size and a magnified crop::
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -44,8 +43,6 @@ TILE = 256
 
 
 def _render(args: argparse.Namespace) -> None:
-    sys.path.insert(0, str(Path(args.library).resolve() if args.library else ROOT))
-    sys.path.insert(1, str(ROOT / "benchmarks"))
     from photos import estimate_depth, test_photos
     from stylize3d_core.depth.sources import PriorDepth
     from stylize3d_core.geometry.camera import Cameras
@@ -153,7 +150,6 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("render", help="render the sheet's frames with one checkout's library")
-    r.add_argument("--library", help="repository root whose stylize3d_core to use (default: this one)")
     r.add_argument("--poses", help="an earlier run's .npz to take the cameras from")
     r.add_argument("--out", required=True)
     r.add_argument("--size", type=int, default=TILE, help="long side the photos are loaded at (default 256)")

@@ -1,6 +1,7 @@
 """Shipped data (stylize3d_core.resources): finding the model, samples and styles; model names and paths."""
 
 import hashlib
+import os
 import subprocess
 import sys
 import zipfile
@@ -116,15 +117,15 @@ def test_shipped_files_inside_a_zip_are_extracted(tmp_path):
         z.write(REPO / "assets/styles/painting_style19_chelsea.jpg",
                 "stylize3d_assets/styles/painting_style19_chelsea.jpg")
     code = (
-        "import sys; sys.path.insert(0, sys.argv[1]); sys.path.insert(0, sys.argv[2])\n"
         "from stylize3d_core import resources as r\n"
         "loc = r.assets_location(); assert loc.how == r.INSTALLED and loc.root is None, loc\n"
         "p = r.sample_photo(); assert p.is_file() and 'data.zip' not in str(p), p\n"
         "print(p); print(r.sample_names(), r.style_names())\n"
         "try:\n    r.model_path('lite')\nexcept r.InputError as e:\n    print(e)\n"
     )
-    out = subprocess.run([sys.executable, "-c", code, str(REPO), str(archive)], capture_output=True, text=True,
-                         timeout=120, cwd=tmp_path)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(archive), str(REPO)])}  # the zip first
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=tmp_path,
+                         env=env)
     assert out.returncode == 0, out.stderr
     extracted, names, error = out.stdout.splitlines()
     assert not Path(extracted).exists()  # removed again at exit

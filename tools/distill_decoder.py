@@ -24,7 +24,6 @@ import argparse
 import json
 import math
 import random
-import sys
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -33,7 +32,6 @@ import torch
 import torch.nn.functional as F
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 from stylize3d_core.bench.speed import psnr as speed_psnr  # noqa: E402
 from stylize3d_core.io.atomic import atomic_path  # noqa: E402

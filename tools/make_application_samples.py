@@ -17,14 +17,12 @@ a shipped style): ``apps_multiview.png``, ``apps_layered.png``, ``apps_layered_p
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 from stylize3d_core.depth.stereo_card import card_depth  # noqa: E402
 from stylize3d_core.eval.multiview import held_out_psnr, procedural_views  # noqa: E402

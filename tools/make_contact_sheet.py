@@ -13,14 +13,12 @@ turbo colour map, 1st..99th percentile: red is near, blue is far.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 from typing import List, Optional, Tuple
 
 import cv2
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from stylize3d_core.depth.prior import estimate_prior  # noqa: E402
 from stylize3d_core.depth.sources import StereoDepth  # noqa: E402

@@ -8,14 +8,12 @@ The first row is the plain 3D photo; the left column shows the style images.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 from stylize3d_core.geometry.trajectories import circle  # noqa: E402
 from stylize3d_core.io.images import load_image, save_image  # noqa: E402

@@ -23,7 +23,6 @@ import cv2
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 from stylize3d_core.io.images import load_image, save_image  # noqa: E402
 from stylize3d_core.resources import sample_photo, style_image  # noqa: E402

@@ -19,7 +19,6 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 from app.viewer import run_viewer_process  # noqa: E402
 from app.viewer.xserver import start_xvfb, xtest_click, xtest_libs  # noqa: E402

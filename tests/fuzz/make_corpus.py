@@ -10,7 +10,6 @@ from __future__ import annotations
 import base64
 import io
 import json
-import sys
 from pathlib import Path
 
 import cv2
@@ -19,7 +18,6 @@ import torch
 from PIL import Image
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parents[1]))
 
 from stylize3d_core.geometry.camera import Cameras  # noqa: E402
 from stylize3d_core.io.camera_path import save_camera_path, save_open3d_trajectory  # noqa: E402

@@ -16,12 +16,9 @@ from /tmp/fz to the corpus.
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
 import atheris
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 import numpy  # noqa: E402,F401  (heavy dependencies are not instrumented)
 import torch  # noqa: E402,F401

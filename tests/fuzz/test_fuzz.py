@@ -16,9 +16,9 @@ from pathlib import Path
 import pytest
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
-
-import targets  # noqa: E402
+_spec = importlib.util.spec_from_file_location("fuzz_targets", HERE / "targets.py")  # tests are no package
+targets = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(targets)
 
 BUDGET_S = int(os.environ.get("STYLIZE3D_FUZZ_SECONDS", "8"))
 
