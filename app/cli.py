@@ -7,7 +7,7 @@
 Exit status: 0 on success, 2 for bad input (the message names the file or the
 setting), 1 when an output could not be written, 3 for an unexpected internal
 error (one line; the traceback is saved to a file), 130 when interrupted (143 on
-SIGTERM). Start it through :mod:`app.entry`, which handles signals from the first line.
+SIGTERM). Start it through :mod:`stylize3d_app.entry`, which handles signals from the first line.
 """
 
 from __future__ import annotations
@@ -65,7 +65,7 @@ def _add_training(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--seed", type=int, default=0)
     p = sub.add_parser("train", help="train (or resume) stage 1 or 2 of the model",
                        description="Train the stylization model. Runs resume from the checkpoint in --out. "
-                                   "For several GPUs: torchrun --nproc_per_node=N -m app.cli train ...")
+                                   "For several GPUs: torchrun --nproc_per_node=N -m stylize3d_app.cli train ...")
     p.add_argument("--stage", type=int, choices=(1, 2), required=True)
     add_options(p, TrainConfig)  # every TrainConfig field with its help and default, but the four below
     p.add_argument("--weight", action="append", default=[], metavar="NAME=VALUE",
@@ -331,6 +331,6 @@ def main(argv: Optional[List[str]] = None) -> int:
         warnings.showwarning = shown
 
 
-if __name__ == "__main__":  # python -m app.cli (torchrun): the handlers once torch is imported
+if __name__ == "__main__":  # python -m stylize3d_app.cli (torchrun): the handlers once torch is imported
     install_signal_handlers()
     sys.exit(main())

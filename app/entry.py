@@ -2,12 +2,12 @@
 
 SIGINT (Ctrl-C) and SIGTERM are handled from the first line, *before* torch and
 the command line are imported (importing torch takes seconds): a signal at any
-moment raises :class:`app.signals.Interrupted` (a ``KeyboardInterrupt``), every writer's
+moment raises :class:`stylize3d_app.signals.Interrupted` (a ``KeyboardInterrupt``), every writer's
 temporary file is removed on the way out (:mod:`stylize3d_core.io.atomic`), and
 the command ends with one line on stderr and the status ``128 + signal``
 (130 for SIGINT, 143 for SIGTERM), never a traceback. A second signal while the
 first one is being handled is ignored, so the clean-up cannot be cut short.
-The handlers and their helpers are in :mod:`app.signals`.
+The handlers and their helpers are in :mod:`stylize3d_app.signals`.
 """
 
 from __future__ import annotations
@@ -17,12 +17,12 @@ import sys
 import warnings
 from typing import List, Optional
 
-from app.signals import (HANDLED, PROG, install_signal_handlers, interrupted_message, interrupted_status,
+from stylize3d_app.signals import (HANDLED, PROG, install_signal_handlers, interrupted_message, interrupted_status,
                          raise_if_interrupted, show_warning)
 
 
 def run(argv: Optional[List[str]] = None) -> int:
-    """Install the signal handlers, then import and run :func:`app.cli.main`; return the exit status.
+    """Install the signal handlers, then import and run :func:`stylize3d_app.cli.main`; return the exit status.
 
     Warnings raised while the libraries import are shown as one line too.
     """
@@ -30,7 +30,7 @@ def run(argv: Optional[List[str]] = None) -> int:
     try:
         install_signal_handlers()  # in the try: a signal may land while it imports the commit check
         try:
-            from app.cli import main  # lazy: imports torch
+            from stylize3d_app.cli import main  # lazy: imports torch
         except Exception:
             # a signal that lands inside a C extension's own import (numpy importing datetime) comes out
             # as that extension's ImportError: it is the interruption, not a broken install

@@ -7,8 +7,8 @@ machinery, a finaliser: it prints "Exception ignored" and carries on). So the ha
 commit check with :mod:`stylize3d_core.io.atomic`: once a signal was received, no temporary output is
 renamed over the user's file, whatever swallowed the exception.
 
-Light on purpose (the standard library only until the handlers are installed): :mod:`app.entry`
-installs them before torch is imported; :mod:`app.cli` uses the helpers.
+Light on purpose (the standard library only until the handlers are installed): :mod:`stylize3d_app.entry`
+installs them before torch is imported; :mod:`stylize3d_app.cli` uses the helpers.
 """
 
 from __future__ import annotations

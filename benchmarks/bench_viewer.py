@@ -13,8 +13,8 @@ photo size, along an orbit drag of ``--frames`` camera positions:
   default 1280x800 window): latency from request to display-ready image.
 
 * **interactive** (``--interactive``): the live view's own machinery without a
-  window -- :class:`~app.viewer.worker.ComputeWorker`, the render state machine
-  (:mod:`app.viewer.render_state`) and the preview-size adaptation -- driven by
+  window -- :class:`~stylize3d_app.viewer.worker.ComputeWorker`, the render state machine
+  (:mod:`stylize3d_app.viewer.render_state`) and the preview-size adaptation -- driven by
   a simulated drag of mouse moves at 60 Hz on a photo of ``--megapixels`` (the
   sample upscaled; default 1 MP), once as the viewer opens it (``--max-size``,
   default 640) and once at its full size, through the stylized path. It reports the
@@ -70,10 +70,10 @@ from typing import Dict, List, Optional, Tuple
 import torch
 
 
-from app.viewer.backend import BACKENDS, DEFAULT_BACKEND, backend_choice
-from app.viewer.orbit import OrbitPose, pose_camera
-from app.viewer.session import DEFAULT_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE, ViewerSession
-from app.viewer.state import PreviewSettings, choose_preview_long_side
+from stylize3d_app.viewer.backend import BACKENDS, DEFAULT_BACKEND, backend_choice
+from stylize3d_app.viewer.orbit import OrbitPose, pose_camera
+from stylize3d_app.viewer.session import DEFAULT_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE, ViewerSession
+from stylize3d_app.viewer.state import PreviewSettings, choose_preview_long_side
 from stylize3d_core.pipeline import PhotoSpec
 from stylize3d_core.render.plain import frame_size
 
@@ -163,10 +163,10 @@ def interactive(model: str, megapixels: float, full_side: int, tmp: str, max_siz
 
     import numpy as np
 
-    from app.viewer.render_state import RenderStateMachine, refine_levels
-    from app.viewer.session import display_image
-    from app.viewer.state import PREVIEW_SAMPLES
-    from app.viewer.worker import ComputeWorker
+    from stylize3d_app.viewer.render_state import RenderStateMachine, refine_levels
+    from stylize3d_app.viewer.session import display_image
+    from stylize3d_app.viewer.state import PREVIEW_SAMPLES
+    from stylize3d_app.viewer.worker import ComputeWorker
 
     s, info = _drag_session(model, megapixels, tmp, max_size)
     h, w = info.size
@@ -360,8 +360,8 @@ def window(model: str, megapixels: float, tmp: str, max_size: int, repeats: int,
 
     import numpy as np
 
-    from app.viewer import run_viewer_process
-    from app.viewer.xserver import start_xvfb, xtest_libs
+    from stylize3d_app.viewer import run_viewer_process
+    from stylize3d_app.viewer.xserver import start_xvfb, xtest_libs
 
     screen = (1280, 800)
     libs, server = xtest_libs(), start_xvfb(screen)

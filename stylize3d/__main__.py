@@ -1,6 +1,6 @@
-"""``python -m stylize3d ...``: runs the ``stylize3d`` command line (``app.entry``, then ``app.cli``)."""
+"""``python -m stylize3d ...``: runs the ``stylize3d`` command line (``stylize3d_app.entry``, then ``stylize3d_app.cli``)."""
 
-from app.entry import entrypoint  # signal-safe: SIGINT during the imports is one line, exit 130
+from stylize3d_app.entry import entrypoint  # signal-safe: SIGINT during the imports is one line, exit 130
 
 if __name__ == "__main__":
     entrypoint()

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from app.cli import main
+from stylize3d_app.cli import main
 from stylize3d_core import __version__, info, resources
 
 

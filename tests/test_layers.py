@@ -11,7 +11,7 @@ import pytest
 import stylize3d_core
 
 LIB = Path(stylize3d_core.__file__).parent
-FORBIDDEN = ("app", "open3d.visualization", "tkinter", "PySide6", "PyQt5", "PyQt6", "wx")
+FORBIDDEN = ("app", "stylize3d_app", "open3d.visualization", "tkinter", "PySide6", "PyQt5", "PyQt6", "wx")
 
 LAYERS: Tuple[Tuple[str, ...], ...] = (
     ("errors",),
@@ -182,7 +182,9 @@ def test_planted_downward_import_is_allowed(library_copy):
 
 ROOT = LIB.parent
 PACKAGES = ("stylize3d_core", "app", "stylize3d")
-"""The repository's importable packages (``assets/`` holds no code that imports)."""
+"""The repository's folders of code (``assets/`` holds no code that imports)."""
+INSTALLED_AS = {"stylize3d_app": "app"}
+"""Installed package name -> the folder it is (``[tool.setuptools.package-dir]``)."""
 
 
 def _module_name(path: Path, root: Path) -> str:
@@ -198,6 +200,7 @@ def import_graph(root: Path, packages: Tuple[str, ...] = PACKAGES) -> dict:
 
     def resolve(dotted: str) -> Optional[str]:
         parts = dotted.split(".")
+        parts[0] = INSTALLED_AS.get(parts[0], parts[0])
         while parts:
             if ".".join(parts) in files:
                 return ".".join(parts)
@@ -263,6 +266,17 @@ def import_cycles(graph: dict) -> List[List[str]]:
                 if len(component) > 1:
                     cycles.append(sorted(component))
     return cycles
+
+
+def test_nothing_imports_the_app_folder_by_its_folder_name():
+    """``app/`` installs as ``stylize3d_app``; an ``import app`` would load a second copy from a checkout."""
+    bad = []
+    for pkg in PACKAGES:
+        for path in sorted((ROOT / pkg).rglob("*.py")):
+            for name in _imports(path):
+                if name == "app" or name.startswith("app."):
+                    bad.append(f"{path.relative_to(ROOT)}: {name}")
+    assert not bad, bad
 
 
 def test_no_import_cycles():

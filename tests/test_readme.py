@@ -33,7 +33,7 @@ def _table(header: str) -> list[list[str]]:
 
 
 def _render_parser():
-    from app.cli import build_parser
+    from stylize3d_app.cli import build_parser
 
     parser = build_parser()
     sub = next(a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction")
@@ -88,7 +88,7 @@ def test_documented_render_defaults_match_render_job():
 
 
 def test_viewer_max_size_as_documented():
-    from app.viewer import build_parser
+    from stylize3d_app.viewer import build_parser
 
     documented = re.search(r"`--max-size (\d+)` by default", README)
     assert documented, "README states the viewer's --max-size default"
@@ -96,8 +96,8 @@ def test_viewer_max_size_as_documented():
 
 
 def test_every_command_shown_parses():
-    from app.cli import build_parser as cli_parser
-    from app.viewer import build_parser as viewer_parser
+    from stylize3d_app.cli import build_parser as cli_parser
+    from stylize3d_app.viewer import build_parser as viewer_parser
 
     commands = _commands()
     assert len(commands) >= 15

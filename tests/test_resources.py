@@ -81,7 +81,7 @@ def test_a_named_model_missing_from_the_install_says_so(fake_install):
 
 
 def test_render_with_a_missing_shipped_model_exits_2(fake_install, tmp_path, capsys):
-    from app.cli import main
+    from stylize3d_app.cli import main
 
     rc = main(["render", str(fake_install / "samples/coffee.jpg"), "--style", str(REPO / "assets/styles/"
                "texture_voronoi_seed7.jpg"), "--model", "lite", "-o", str(tmp_path / "o.mp4"), "-q"])

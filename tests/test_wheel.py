@@ -36,7 +36,7 @@ pytestmark = pytest.mark.slow  # builds and installs a wheel, renders and opens 
 REPO = Path(__file__).resolve().parents[1]
 BUILD_INPUTS = ("pyproject.toml", "README.md", "LICENSE", "stylize3d", "stylize3d_core", "app", "assets")
 """What the build reads (pyproject.toml's packages, package-dir, readme and license-files)."""
-OUR_PACKAGES = ("stylize3d", "stylize3d_core", "app", "stylize3d_assets")
+OUR_PACKAGES = ("stylize3d", "stylize3d_core", "stylize3d_app", "stylize3d_assets")
 TIMEOUT_S = 300
 
 
@@ -97,9 +97,11 @@ def test_the_wheel_carries_every_package_the_model_samples_and_styles(built):
     wheel: Path = built["wheel"]
     names = set(zipfile.ZipFile(wheel).namelist())
     # Every package folder of the source tree is in the wheel (pyproject.toml lists them by hand).
-    for top in ("stylize3d", "stylize3d_core", "app"):
+    for top, installed in (("stylize3d", "stylize3d"), ("stylize3d_core", "stylize3d_core"), ("app", "stylize3d_app")):
         for init in (REPO / top).rglob("__init__.py"):
-            assert init.relative_to(REPO).as_posix() in names, f"{init.parent} is missing from pyproject's packages"
+            name = f"{installed}/{init.relative_to(REPO / top).as_posix()}"
+            assert name in names, f"{init.parent} is missing from pyproject's packages"
+    assert not any(n.startswith("app/") for n in names)  # no top-level package called "app"
     for name in ("model/stylize3d_lite.safetensors", "model/selfie_segmentation.onnx", "model/LICENSE-mediapipe.txt",
                  "model/README.md", "samples/coffee.jpg",
                  "styles/painting_style19_chelsea.jpg", "styles/vangogh_starry_night.jpg", "styles/README.md"):
@@ -116,7 +118,7 @@ def test_installed_packages_come_from_the_fresh_venv_not_the_checkout(built):
     code = (
         "import importlib, importlib.metadata as md, json, sys\n"
         f"mods = {{n: importlib.import_module(n).__file__ for n in {OUR_PACKAGES!r}}}\n"
-        "from app.viewer.session import DEFAULT_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE\n"
+        "from stylize3d_app.viewer.session import DEFAULT_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE\n"
         "viewer = {k: str(v) for k, v in dict(model=DEFAULT_MODEL, photo=SAMPLE_PHOTO, style=SAMPLE_STYLE).items()}\n"
         "dist = str(md.distribution('stylize3d').locate_file('stylize3d_core'))\n"
         "print(json.dumps({'modules': mods, 'viewer': viewer, 'dist': dist,\n"

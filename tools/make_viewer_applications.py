@@ -56,7 +56,7 @@ def main() -> None:
         ]
         (t / "steps.json").write_text(json.dumps(steps))
         env = {**os.environ, "STYLIZE3D_CONFIG_DIR": str(t / "config")}
-        subprocess.run([sys.executable, "-m", "app.viewer", "--test-script", str(t / "steps.json"),
+        subprocess.run([sys.executable, "-m", "stylize3d_app.viewer", "--test-script", str(t / "steps.json"),
                         "--test-report", str(t / "report.json")], cwd=ROOT, env=env, check=True)
         tiles = [load_image(g, max_size=4096).rgb for g in grabs]  # the window grabs, at their own size
         h, w = (min(tile.shape[i] for tile in tiles) for i in (0, 1))

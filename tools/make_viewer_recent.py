@@ -20,8 +20,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
-from app.viewer import run_viewer_process  # noqa: E402
-from app.viewer.xserver import start_xvfb, xtest_click, xtest_libs  # noqa: E402
+from stylize3d_app.viewer import run_viewer_process  # noqa: E402
+from stylize3d_app.viewer.xserver import start_xvfb, xtest_click, xtest_libs  # noqa: E402
 
 SAMPLES = ROOT / "assets" / "samples"
 FILE_MENU = (22, 12)

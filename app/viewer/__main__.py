@@ -1,4 +1,4 @@
-"""``python -m app.viewer``: same as ``stylize3d-viewer``."""
+"""``python -m stylize3d_app.viewer``: same as ``stylize3d-viewer``."""
 
 from . import entrypoint
 

@@ -3,11 +3,11 @@
 * :class:`PhotoController`: open photos and styles, the depth source and its
   edge alignment, the sample, and encoding the photo for the model;
 * :class:`CameraPathController`: the trajectory, the camera-path preview
-  (:class:`~app.viewer.state.Playback`), loading and saving camera paths;
+  (:class:`~stylize3d_app.viewer.state.Playback`), loading and saving camera paths;
 * :class:`ExportController`: video export with progress and Cancel, screenshots.
 
 They keep no app state of their own: everything lives in the window's
-:class:`~app.viewer.state.ViewState`, which they replace (the export's cancel
+:class:`~stylize3d_app.viewer.state.ViewState`, which they replace (the export's cancel
 event is the one exception: a thread handle, not state). They use the window
 through its small public surface: ``state``, ``panel``, ``session``, ``worker``,
 ``post``, ``set_status``/``set_busy``, ``show_error``, ``view_changed``,
@@ -344,7 +344,7 @@ class CameraPathController(Controller):
 
     def set_limits(self, limits: TrajectoryLimits) -> None:
         """Bound the trajectory's parameter fields by what the open photo shows cleanly
-        (:func:`~app.viewer.state.trajectory_limits`) and clamp the trajectory into them."""
+        (:func:`~stylize3d_app.viewer.state.trajectory_limits`) and clamp the trajectory into them."""
         w = self.window
         p = w.panel
         t = clamp_trajectory(w.state.trajectory, limits)

@@ -8,17 +8,17 @@
 * **Layered stylization** (Sec. 4.5): a foreground mask from a file, the automatic
   person segmentation (``scene.masks.person_mask``) or GrabCut in
   a rectangle (sliders as fractions of the photo), kept at its own strength (0: the
-  original colours); the session renders through :class:`~app.viewer.layers.ViewerLayers`.
+  original colours); the session renders through :class:`~stylize3d_app.viewer.layers.ViewerLayers`.
 * **Exports**: baked-colour PLY, 3D Gaussian splat ``.ply``, side-by-side (full
   or half width) and red-cyan anaglyph videos with an eye distance, boomerang
   loops (MP4, GIF, WebP), one self-contained web page to orbit in a browser
   (``stylize3d_core/export/web_page.py``; it plays the export's camera path),
   camera paths as stylize3d JSON and Open3D trajectory.
 
-:class:`ApplicationsController` is a controller like those of :mod:`app.viewer.actions`:
+:class:`ApplicationsController` is a controller like those of :mod:`stylize3d_app.viewer.actions`:
 its methods run on the GUI main thread, the work (the library's functions below)
 on the compute worker; exports go through
-:meth:`~app.viewer.actions.ExportController.run_export` (progress, Cancel, atomic
+:meth:`~stylize3d_app.viewer.actions.ExportController.run_export` (progress, Cancel, atomic
 writes by the library's writers). The work functions (:func:`layers_from_file`,
 :func:`layers_by_grabcut`, :func:`merged_photo`, :func:`export_point_file`,
 :func:`export_web_page`, :func:`export_video`, ...) take the session and need no window.

@@ -1,6 +1,6 @@
 """What the viewer's controllers (:mod:`.actions`, :mod:`.applications`) may use of the window.
 
-The window (:class:`~app.viewer.window.ViewerWindow`) builds the controllers and hands itself to them as a
+The window (:class:`~stylize3d_app.viewer.window.ViewerWindow`) builds the controllers and hands itself to them as a
 :class:`ViewerHost`; the controllers know the window only through this protocol, so they never import
 :mod:`.window` and the window stays the only module that wires them together. Main thread only, except
 :meth:`ViewerHost.post`.
@@ -35,7 +35,7 @@ class ViewerHost(Protocol):
     em: float
     """The font size in pixels: the unit of every widget's size."""
     photos: Any
-    """The other controllers (:class:`~app.viewer.actions.PhotoController`, ``CameraPathController``,
+    """The other controllers (:class:`~stylize3d_app.viewer.actions.PhotoController`, ``CameraPathController``,
     ``ExportController``), for the actions that span two of them."""
     paths: Any
     exports: Any

@@ -1,7 +1,7 @@
 """The viewer's widgets: side panel, status area, help overlay and menus (construction only).
 
 :class:`Panel` builds the widgets and keeps references to them; the window
-(:mod:`app.viewer.window`) connects their callbacks. Sizes are in em units (the
+(:mod:`stylize3d_app.viewer.window`) connects their callbacks. Sizes are in em units (the
 theme's font size), so the layout follows the UI scale.
 """
 

@@ -486,7 +486,7 @@ class ScriptRunner:
         w = self.window
         self.main(w.paths.add_keyframe)
         return self.main(lambda: {"keyframes": len(w.state.keyframes.keyframes), "labels": list(
-            __import__("app.viewer.keyframe_edit", fromlist=["x"]).keyframe_labels(w.state.keyframes))})
+            __import__("stylize3d_app.viewer.keyframe_edit", fromlist=["x"]).keyframe_labels(w.state.keyframes))})
 
     def op_edit_keyframe(self, index: int = 0, fov: float = None, seconds: float = None, move: int = 0,
                          delete: bool = False, loop: bool = None) -> Dict[str, Any]:

@@ -1,7 +1,7 @@
 """The viewer's compute side: the loaded 3D photo, its renderers, the model and the style.
 
 :class:`ViewerSession` has no widgets and knows nothing of Open3D's GUI; the
-window runs its methods as :class:`~app.viewer.worker.ComputeWorker` tasks and
+window runs its methods as :class:`~stylize3d_app.viewer.worker.ComputeWorker` tasks and
 renders. It keeps everything that does not depend on the camera:
 
 * the 3D photo and its :class:`~stylize3d_core.render.plain.PlainRenderer`

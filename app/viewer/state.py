@@ -10,7 +10,7 @@ worker, so no state is shared between threads. :func:`shows_stylized` is the
 one rule for whether the view goes through the model.
 
 When a frame is needed (a preview at once after every change, the full frame
-once the view rests) is :mod:`app.viewer.render_state`'s state machine.
+once the view rests) is :mod:`stylize3d_app.viewer.render_state`'s state machine.
 :func:`choose_preview_long_side` keeps previews within their time budget
 (~24 fps) by choosing the preview size from the measured render times.
 """
@@ -105,10 +105,10 @@ class PreviewSettings:
             hand-over to the GUI thread, a frame every ~1/24 s while dragging (>= 24 fps where the
             display keeps up).
         rest_delay_s: the camera must rest this long before the full frame is rendered. Default
-            :data:`~app.viewer.render_state.REST_DELAY_S`.
+            :data:`~stylize3d_app.viewer.render_state.REST_DELAY_S`.
         full_budget_s: seconds from the rest to a sharp frame: a full frame slower than this (less the
             rest delay) is rendered progressively, a smaller level first, as large as fits
-            (:func:`~app.viewer.render_state.refine_levels`). Default 0.5.
+            (:func:`~stylize3d_app.viewer.render_state.refine_levels`). Default 0.5.
     """
 
     preview_long_side: int = 128
@@ -130,7 +130,7 @@ class PreviewSettings:
 
 
 class PhotoInfo(NamedTuple):
-    """What :meth:`~app.viewer.session.ViewerSession.load_photo` built (the open 3D photo)."""
+    """What :meth:`~stylize3d_app.viewer.session.ViewerSession.load_photo` built (the open 3D photo)."""
 
     path: str
     size: Tuple[int, int]  # (H, W) of the photo
@@ -141,7 +141,7 @@ class PhotoInfo(NamedTuple):
     seconds: float
     camera_range: CameraRange = CameraRange()
     """The part of the viewer's camera range this photo shows cleanly (``Photo3D.camera_range``): the
-    orbit limits (:meth:`~app.viewer.orbit.OrbitLimits.from_range`) and the trajectory limits
+    orbit limits (:meth:`~stylize3d_app.viewer.orbit.OrbitLimits.from_range`) and the trajectory limits
     (:func:`trajectory_limits`) come from it."""
     range_scale: float = 1.0
     """That part as a fraction of the full range (``LDI.range_scale``; 1: all of it)."""

@@ -2,21 +2,21 @@
 
 Our renderer is the point rasterizer (+ the model's decoder), not Open3D's 3D
 scene renderer, so the view is a ``gui.ImageWidget`` updated with each rendered
-frame, and its mouse events drive the camera (:mod:`app.viewer.orbit`).
+frame, and its mouse events drive the camera (:mod:`stylize3d_app.viewer.orbit`).
 
 Threads:
 
 * the GUI **main thread** runs this class: widgets, ``_on_*`` callbacks, the
   tick timer (rest detection, camera-path preview);
-* the **compute worker** (:class:`~app.viewer.worker.ComputeWorker`) runs the
-  :class:`~app.viewer.session.ViewerSession`: loading, encoding, styles,
+* the **compute worker** (:class:`~stylize3d_app.viewer.worker.ComputeWorker`) runs the
+  :class:`~stylize3d_app.viewer.session.ViewerSession`: loading, encoding, styles,
   renders, export. Its results come back through :meth:`ViewerWindow.post`
   (``gui.Application.instance.post_to_main_thread``).
 
 Composition: this class owns the widgets, the live view (mouse, keys, frame
 scheduling) and closing; what the panel's buttons do is in three controllers
-(:mod:`app.viewer.actions`): ``photos``, ``paths`` and ``exports``. All app
-state is one :class:`~app.viewer.state.ViewState` in ``self.state``.
+(:mod:`stylize3d_app.viewer.actions`): ``photos``, ``paths`` and ``exports``. All app
+state is one :class:`~stylize3d_app.viewer.state.ViewState` in ``self.state``.
 
 Closing: a close request first stops the worker (and the test-script thread),
 then a helper thread waits for them and posts the real ``window.close()``; so no
@@ -72,7 +72,7 @@ MIN_WINDOW = (640, 480)
 
 @dataclass(frozen=True)
 class ViewerOptions:
-    """Start-up options (from the command line). See ``app.viewer.entrypoint`` for each flag.
+    """Start-up options (from the command line). See ``stylize3d_app.viewer.entrypoint`` for each flag.
 
     Attributes:
         spec: the photo to open (``spec.photo``, or None) and how it becomes a 3D photo.
@@ -103,10 +103,10 @@ class ViewerOptions:
 class ViewerWindow:
     """The viewer's window, widgets and view callbacks, composed with its controllers (see the module docstring).
 
-    ``photos`` (:class:`~app.viewer.actions.PhotoController`), ``paths``
-    (:class:`~app.viewer.actions.CameraPathController`) and ``exports``
-    (:class:`~app.viewer.actions.ExportController`) do the rest; all app state is
-    ``state`` (:class:`~app.viewer.state.ViewState`).
+    ``photos`` (:class:`~stylize3d_app.viewer.actions.PhotoController`), ``paths``
+    (:class:`~stylize3d_app.viewer.actions.CameraPathController`) and ``exports``
+    (:class:`~stylize3d_app.viewer.actions.ExportController`) do the rest; all app state is
+    ``state`` (:class:`~stylize3d_app.viewer.state.ViewState`).
 
     Thread use: GUI main thread only, except :meth:`post` and :meth:`call_on_main`
     (any thread) and the worker callbacks they wrap.
@@ -516,7 +516,7 @@ class ViewerWindow:
     # -- view changes and rendering -----------------------------------------------------
     def view_changed(self) -> None:
         """The view changed: ask for a preview now (interrupting a full render in progress); the tick asks
-        for the full frame once it rests (:class:`~app.viewer.render_state.RenderStateMachine`). The first
+        for the full frame once it rests (:class:`~stylize3d_app.viewer.render_state.RenderStateMachine`). The first
         preview after a rest is the smallest (``min_preview_long_side``), and so is every one requested
         before a preview of this movement is on screen (a newer request replaces a waiting one): it is what
         a new drag waits for."""

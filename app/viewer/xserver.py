@@ -1,6 +1,6 @@
 """A private X server and real input events for driving the viewer window (window tests, ``bench_viewer --window``).
 
-Headless like the test hooks (:mod:`app.viewer.script`): nothing here imports
+Headless like the test hooks (:mod:`stylize3d_app.viewer.script`): nothing here imports
 Open3D. :func:`start_xvfb` starts an Xvfb that picks a free display number
 itself (``-displayfd``); :func:`xtest_libs` loads libX11 and libXtst through
 ctypes, whose ``XTestFake*Event`` calls send real mouse and key events (:func:`xtest_click`: a click

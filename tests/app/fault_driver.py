@@ -7,7 +7,7 @@ inside ``unshare -rm``), ``fsize`` (RLIMIT_FSIZE far below the new outputs'
 sizes) or ``unwritable`` (WORK/disk made read-only for this user: run it
 without CAP_DAC_OVERRIDE when root). For each format it first writes a good
 output with no fault, then applies the fault and exports again over it through
-``app.cli.main``; it reports the exit status, whether the old output is still
+``stylize3d_app.cli.main``; it reports the exit status, whether the old output is still
 byte-identical, what else is in the folder, and stderr. Used by test_faults.py.
 """
 
@@ -23,7 +23,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from app.cli import main
+from stylize3d_app.cli import main
 
 FORMATS = {  # name -> (destination relative to the faulty folder, extra argv given that path)
     "mp4": ("v.mp4", lambda d, out: ["-o", str(d / "v.mp4")]),

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import torch
 
-from app.cli import main
+from stylize3d_app.cli import main
 from stylize3d_core.io.camera_path import load_camera_path
 from stylize3d_core.io.images import save_image
 from stylize3d_core.io.ply import read_ply
@@ -203,7 +203,7 @@ def test_render_options_are_the_job_fields():
     """The render command's options are derived from RenderJob and PhotoSpec: one per field, same defaults."""
     import dataclasses
 
-    from app.cli import build_parser
+    from stylize3d_app.cli import build_parser
     from stylize3d_core.pipeline import PhotoSpec, RenderJob
 
     args = build_parser().parse_args(["render", "p.jpg"])
@@ -224,7 +224,7 @@ def test_render_options_are_the_job_fields():
 
 
 def test_train_loss_weight_overrides_are_checked(capsys):
-    from app.cli import _loss_weights
+    from stylize3d_app.cli import _loss_weights
 
     w = _loss_weights(["colour=0", "teacher=2.5"])
     assert w.colour == 0.0 and w.teacher == 2.5 and w.style == 0.1  # the others keep their defaults
@@ -235,7 +235,7 @@ def test_train_loss_weight_overrides_are_checked(capsys):
 
 
 def test_train_style_stages_are_checked(capsys):
-    from app.cli import _stages
+    from stylize3d_app.cli import _stages
 
     assert _stages("1,2,3") == (1, 2, 3)
     for bad, words in (("1,x", "comma-separated integers"), ("1,9", "style_stages"), ("2,2", "style_stages")):
@@ -250,7 +250,7 @@ def test_the_train_command_line_is_derived_from_trainconfig():
     import argparse
     import dataclasses
 
-    from app.cli import build_parser
+    from stylize3d_app.cli import build_parser
     from stylize3d_core.train.trainer import TrainConfig
 
     parser = build_parser()

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from app.cli import main
+from stylize3d_app.cli import main
 from stylize3d_core.export.camera_paths import camera_path_format
 from stylize3d_core.export.splat import read_splat_ply
 from stylize3d_core.io.images import save_image

@@ -6,7 +6,7 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from app.cli import main
+from stylize3d_app.cli import main
 from stylize3d_core.eval.multiview import procedural_views
 from stylize3d_core.multiview import load_views, save_views
 

@@ -5,8 +5,8 @@ import json
 
 import pytest
 
-from app.cli import main
-from app.viewer.settings import load_settings
+from stylize3d_app.cli import main
+from stylize3d_app.viewer.settings import load_settings
 from stylize3d_core.errors import InputError
 from stylize3d_core.io.images import save_image
 from stylize3d_core.io.json_files import read_json_file

@@ -4,7 +4,7 @@ Each export over a good file must exit with the right status, leave the old file
 byte for byte, leave no temporary file, and say what happened in one line
 (no traceback). The disk faults run ``fault_driver.py`` in a child process
 (a small tmpfs in a private mount namespace, RLIMIT_FSIZE, a folder without
-write permission); the signals hit real ``python -m app.entry`` processes.
+write permission); the signals hit real ``python -m stylize3d_app.entry`` processes.
 """
 
 from __future__ import annotations
@@ -22,8 +22,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from app import entry, signals
-from app.cli import INTERNAL_ERROR, main
+from stylize3d_app import entry, signals
+from stylize3d_app.cli import INTERNAL_ERROR, main
 
 ROOT = Path(__file__).resolve().parents[2]
 DRIVER = Path(__file__).with_name("fault_driver.py")
@@ -99,7 +99,7 @@ def test_unwritable_folder_keeps_every_previous_output(noise_photo, tmp_path):
 # --- signals -----------------------------------------------------------------------------------
 
 def _spawn(args, tmp_path) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "app.entry", *args], cwd=ROOT, env=ENV,
+    return subprocess.Popen([sys.executable, "-m", "stylize3d_app.entry", *args], cwd=ROOT, env=ENV,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
@@ -112,7 +112,7 @@ def _wait_for(pred, proc, what: str, limit: float = 120.0) -> None:
 
 
 def _handlers_installed(pid: int) -> bool:
-    """True once app.entry's SIGTERM handler is in place (Python itself does not catch SIGTERM)."""
+    """True once stylize3d_app.entry's SIGTERM handler is in place (Python itself does not catch SIGTERM)."""
     try:
         status = Path(f"/proc/{pid}/status").read_text()
     except OSError:
@@ -168,7 +168,7 @@ def test_signal_during_export_keeps_the_old_output(kind, sig, noise_photo, tmp_p
 
 @pytest.fixture
 def entry_handlers():
-    """app.entry's signal handlers in this (the main) thread, restored afterwards."""
+    """stylize3d_app.entry's signal handlers in this (the main) thread, restored afterwards."""
     from stylize3d_core.io.atomic import remove_commit_check
 
     saved = {s: signal.getsignal(s) for s in entry.HANDLED}
@@ -321,7 +321,7 @@ def test_viewer_closes_on_a_signal_like_its_close_button(sig, noise_photo, tmp_p
         with os.fdopen(r) as fh:
             display = fh.readline().strip()
         assert display.isdigit(), "Xvfb did not start"
-        proc = subprocess.Popen([sys.executable, "-m", "app.viewer", str(noise_photo), "--no-model",
+        proc = subprocess.Popen([sys.executable, "-m", "stylize3d_app.viewer", str(noise_photo), "--no-model",
                                  "--size", "640x480"], cwd=ROOT, env={**ENV, "DISPLAY": f":{display}"},
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         _wait_for(lambda: _handlers_installed(proc.pid), proc, "the viewer's signal handlers", limit=180)
@@ -338,7 +338,7 @@ def test_the_console_script_is_the_signal_safe_entry_point():
     import tomllib
 
     scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
-    assert scripts["stylize3d"] == "app.entry:entrypoint"
+    assert scripts["stylize3d"] == "stylize3d_app.entry:entrypoint"
 
 
 def test_warnings_while_importing_are_one_line_too(capsys, monkeypatch):
@@ -346,13 +346,13 @@ def test_warnings_while_importing_are_one_line_too(capsys, monkeypatch):
 
     monkeypatch.setattr(warnings, "showwarning", warnings.showwarning)
     monkeypatch.setattr(entry, "install_signal_handlers", lambda: None)  # keep pytest's own handlers
-    import app.cli
+    import stylize3d_app.cli
 
     def warn_then_fail(argv):
         warnings.warn("something odd\n  in two lines", RuntimeWarning)
         return 0
 
-    monkeypatch.setattr(app.cli, "main", warn_then_fail)
+    monkeypatch.setattr(stylize3d_app.cli, "main", warn_then_fail)
     assert entry.run([]) == 0
     assert capsys.readouterr().err == "stylize3d: warning: something odd in two lines\n"
 
@@ -363,18 +363,18 @@ def test_a_signal_inside_a_c_extensions_import_is_the_interruption(capsys, monke
     import sys
     import types
 
-    class Importing(types.ModuleType):  # ``from app.cli import main`` as numpy's import failed then
+    class Importing(types.ModuleType):  # ``from stylize3d_app.cli import main`` as numpy's import failed then
         def __getattr__(self, name):
             signals._received.append(int(signal.SIGTERM))
             raise ImportError('PyCapsule_Import could not import module "datetime"')
 
     monkeypatch.setattr(entry, "install_signal_handlers", lambda: None)  # keep pytest's own handlers
-    monkeypatch.setitem(sys.modules, "app.cli", Importing("app.cli"))
+    monkeypatch.setitem(sys.modules, "stylize3d_app.cli", Importing("stylize3d_app.cli"))
     try:
         assert entry.run([]) == 143
     finally:
         signals._received.clear()
     assert capsys.readouterr().err == "stylize3d: terminated (SIGTERM); nothing was written\n"
-    monkeypatch.setitem(sys.modules, "app.cli", types.ModuleType("app.cli"))  # no signal: the real error
+    monkeypatch.setitem(sys.modules, "stylize3d_app.cli", types.ModuleType("stylize3d_app.cli"))  # no signal: the real error
     with pytest.raises(ImportError):
         entry.run([])

@@ -9,10 +9,10 @@ from typing import Literal, Optional
 
 import pytest
 
-from app.options import add_options, from_args
-from app.viewer import build_parser as viewer_parser
-from app.viewer import main as viewer_main
-from app.viewer.state import VIEWER_MAX_SIZE
+from stylize3d_app.options import add_options, from_args
+from stylize3d_app.viewer import build_parser as viewer_parser
+from stylize3d_app.viewer import main as viewer_main
+from stylize3d_app.viewer.state import VIEWER_MAX_SIZE
 from stylize3d_core.errors import InputError
 from stylize3d_core.options import check_options, documented, option
 from stylize3d_core.pipeline import PhotoSpec

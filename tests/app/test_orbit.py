@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from app.viewer.orbit import (
+from stylize3d_app.viewer.orbit import (
     HOME, OrbitLimits, OrbitPose, OrbitScene, apply_drag, apply_wheel, cam_to_world, camera_z, clamp_pose,
     dolly, dolly_range, orbit, pan, pose_camera, relative_to, rotation,
 )

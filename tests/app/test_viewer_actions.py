@@ -13,9 +13,9 @@ from typing import Any, List
 
 import pytest
 
-from app.viewer.actions import CameraPathController, ExportController, PhotoController
-from app.viewer.orbit import OrbitScene
-from app.viewer.state import PhotoInfo, ViewState
+from stylize3d_app.viewer.actions import CameraPathController, ExportController, PhotoController
+from stylize3d_app.viewer.orbit import OrbitScene
+from stylize3d_app.viewer.state import PhotoInfo, ViewState
 from stylize3d_core.errors import InputError
 from stylize3d_core.geometry.trajectories import static
 from stylize3d_core.pipeline import PhotoSpec
@@ -124,7 +124,7 @@ def test_export_needs_a_photo_and_uses_the_one_rule_for_stylized(tmp_path, avail
 def test_keyframe_edits_are_pure_and_keep_durations_with_their_keyframe():
     import numpy as np
 
-    from app.viewer import keyframe_edit as KE
+    from stylize3d_app.viewer import keyframe_edit as KE
     from stylize3d_core.errors import InputError
     from stylize3d_core.geometry.camera import Cameras
 

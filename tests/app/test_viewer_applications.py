@@ -1,7 +1,7 @@
 """The viewer's Applications menu (app/viewer/applications.py, app/viewer/layers.py) without a window.
 
 The controller runs against a stand-in window whose worker runs each task at
-once on the calling thread, with a real :class:`~app.viewer.session.ViewerSession`
+once on the calling thread, with a real :class:`~stylize3d_app.viewer.session.ViewerSession`
 (the sample photo, an untrained model) and the real camera-path and export
 controllers: each menu action's library call is made and its files read back.
 The window itself is driven by ``test_viewer_applications_gui`` at the end (Xvfb).
@@ -21,12 +21,12 @@ import numpy as np
 import pytest
 from PIL import Image
 
-import app.viewer.applications as A
-from app.viewer.actions import CameraPathController, ExportController
-from app.viewer.layers import ViewerLayers
-from app.viewer.orbit import HOME, OrbitPose, pose_camera
-from app.viewer.session import SAMPLE_PHOTO, SAMPLE_STYLE, ViewerSession
-from app.viewer.state import VideoExport as ViewerExport, ViewState
+import stylize3d_app.viewer.applications as A
+from stylize3d_app.viewer.actions import CameraPathController, ExportController
+from stylize3d_app.viewer.layers import ViewerLayers
+from stylize3d_app.viewer.orbit import HOME, OrbitPose, pose_camera
+from stylize3d_app.viewer.session import SAMPLE_PHOTO, SAMPLE_STYLE, ViewerSession
+from stylize3d_app.viewer.state import VideoExport as ViewerExport, ViewState
 from stylize3d_core.errors import InputError
 from stylize3d_core.eval.multiview import procedural_views
 from stylize3d_core.export.camera_paths import camera_path_format, read_camera_path

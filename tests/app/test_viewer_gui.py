@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from app.viewer import run_viewer_process
-from app.viewer.xserver import start_xvfb, xtest_click, xtest_libs
+from stylize3d_app.viewer import run_viewer_process
+from stylize3d_app.viewer.xserver import start_xvfb, xtest_click, xtest_libs
 
 pytestmark = [pytest.mark.gui, pytest.mark.slow]  # each test starts Open3D in a subprocess: 8-30 s
 

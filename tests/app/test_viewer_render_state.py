@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from app.viewer.render_state import (
+from stylize3d_app.viewer.render_state import (
     PROGRESSIVE_LEVELS, RenderPhase, RenderStateMachine, level_cost_model, refine_levels,
 )
 from stylize3d_core.errors import InputError

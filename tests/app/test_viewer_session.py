@@ -13,9 +13,9 @@ import numpy as np
 import open3d as o3d
 import pytest
 
-import app.viewer.session as session_mod
-from app.viewer.orbit import HOME, OrbitPose, pose_camera
-from app.viewer.session import (
+import stylize3d_app.viewer.session as session_mod
+from stylize3d_app.viewer.orbit import HOME, OrbitPose, pose_camera
+from stylize3d_app.viewer.session import (
     NO_MODEL, SAMPLE_PHOTO, SAMPLE_STYLE, ExportJob, ViewerSession, colour_jump, display_image,
 )
 from stylize3d_core.render.plain import frame_size
@@ -175,7 +175,7 @@ def test_display_image_and_open3d_handoff():
 def test_split_view_puts_before_left_and_after_right():
     import numpy as np
 
-    from app.viewer.session import split_view
+    from stylize3d_app.viewer.session import split_view
 
     before, after = np.zeros((4, 10, 3), np.float32), np.ones((4, 10, 3), np.float32) * 0.5
     out = split_view(before, after, 0.3)
@@ -213,7 +213,7 @@ def test_previews_are_colour_matched_to_the_full_frame(untrained):
 def test_the_photos_clean_camera_range_bounds_the_orbit(plain):
     from dataclasses import replace
 
-    from app.viewer.orbit import OrbitLimits, clamp_pose
+    from stylize3d_app.viewer.orbit import OrbitLimits, clamp_pose
     from stylize3d_core.geometry.camera_range import CameraRange
 
     rng = plain.info.camera_range
@@ -274,7 +274,7 @@ def test_the_original_above_the_photos_size_is_rendered_at_it_and_scaled_up(plai
 
 
 def test_shown_as_scales_a_preview_to_the_full_frame():
-    from app.viewer.session import shown_as
+    from stylize3d_app.viewer.session import shown_as
 
     small = np.zeros((2, 3, 3), np.uint8)
     small[:, :] = [10, 200, 40]

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from app.viewer.settings import (
+from stylize3d_app.viewer.settings import (
     MAX_RECENT, ViewerSettings, config_dir, load_settings, parse_settings, save_settings, settings_path,
 )
 from stylize3d_core.errors import ExportError

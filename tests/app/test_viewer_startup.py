@@ -11,8 +11,8 @@ import sys
 import numpy as np
 import pytest
 
-from app.viewer import backend
-from app.viewer import build_parser, main
+from stylize3d_app.viewer import backend
+from stylize3d_app.viewer import build_parser, main
 
 
 def test_choice_from_the_command_line_the_environment_or_the_default(monkeypatch):
@@ -68,7 +68,7 @@ def test_widget_images_are_flipped_only_under_opengl(monkeypatch):
 def _open_window(display: str, choice: str) -> str:
     """stdout + stderr of a subprocess that selects ``choice`` and opens an Open3D window on ``display``
     (Filament logs the back end it resolved; "opened" once the window ran a tick)."""
-    code = ("from app.viewer.backend import start_gui\n"
+    code = ("from stylize3d_app.viewer.backend import start_gui\n"
             f"print(start_gui({choice!r}), flush=True)\n"
             "import open3d.visualization.gui as gui\n"
             "app = gui.Application.instance\n"
@@ -82,7 +82,7 @@ def test_the_choice_reaches_filament_and_opengl_falls_back_without_glx(monkeypat
     """Each choice resolves to its Filament back end (its own log line: the RenderingType values are right).
     An X server without GLX (Xvfb -extension GLX) cannot run an OpenGL engine: the choice falls back to
     Open3D's own (Vulkan), and the window still opens there."""
-    from app.viewer.xserver import XDisplay, start_xvfb
+    from stylize3d_app.viewer.xserver import XDisplay, start_xvfb
 
     assert XDisplay.open("") is None  # no display named
     servers = [start_xvfb((640, 480)), start_xvfb((640, 480), extra_args=("-extension", "GLX"))]
@@ -114,7 +114,7 @@ def test_the_display_connection_is_held_until_open3d_has_its_own(monkeypatch):
     """An X server resets when its last client leaves, and refuses connections meanwhile: the GLX check's
     connection stays open until Open3D has connected (start_gui), so Open3D never meets the reset. Checked
     where the race lives: a fresh, resetting Xvfb whose only client is the check, 5 starts in a row."""
-    from app.viewer.xserver import XDisplay, start_xvfb
+    from stylize3d_app.viewer.xserver import XDisplay, start_xvfb
 
     server = start_xvfb((640, 480))
     if server is None:
@@ -145,7 +145,7 @@ def test_a_display_that_does_not_open_is_a_clear_error(monkeypatch, capsys):
 
 
 def test_full_frames_use_all_but_one_core_from_three_cores_and_bad_counts_are_refused(capsys):
-    from app.viewer import default_full_threads
+    from stylize3d_app.viewer import default_full_threads
 
     assert [default_full_threads(n) for n in (1, 2, 3, 4, 16)] == [1, 1, 2, 3, 15]
     assert main(["--full-threads", "0", "--no-model"]) == 2

@@ -7,8 +7,8 @@ from dataclasses import replace
 import pytest
 import torch
 
-from app.viewer.orbit import HOME, OrbitPose, OrbitScene, cam_to_world
-from app.viewer.state import (
+from stylize3d_app.viewer.orbit import HOME, OrbitPose, OrbitScene, cam_to_world
+from stylize3d_app.viewer.state import (
     VIEWER_MAX_SIZE, VideoExport, PhotoInfo, Playback, PreviewSettings, ViewState, choose_preview_long_side,
     clamp_state_pose, clamp_trajectory, export_destination, fov_range, full_frame_size, playback_frame,
     preview_cost_model, resolve_open_path, shows_stylized, trajectory_cameras, trajectory_limits, user_choices,
@@ -180,14 +180,14 @@ def test_user_choices_leave_out_what_was_loaded():
 
 
 def test_wheel_up_moves_forwards_unless_inverted():
-    from app.viewer.state import wheel_ticks
+    from stylize3d_app.viewer.state import wheel_ticks
 
     assert wheel_ticks(1.0) == 1.0 and wheel_ticks(-2.0) == -2.0
     assert wheel_ticks(1.0, invert=True) == -1.0
 
 
 def test_export_progress_text_estimates_the_time_left():
-    from app.viewer.state import export_progress_text
+    from stylize3d_app.viewer.state import export_progress_text
 
     assert export_progress_text(0, 90, 0.4) == "Exporting 0/90 frames, 0:00 elapsed"
     assert export_progress_text(10, 90, 20.0) == "Exporting 10/90 frames, 0:20 elapsed, about 2:40 left"
@@ -197,7 +197,7 @@ def test_export_progress_text_estimates_the_time_left():
 def test_typed_paths_absolute_home_and_relative(tmp_path):
     import os
 
-    from app.viewer.state import resolve_typed_path
+    from stylize3d_app.viewer.state import resolve_typed_path
 
     assert resolve_typed_path("/tmp/x.mp4", str(tmp_path)) == "/tmp/x.mp4"
     assert resolve_typed_path("  clips/x.mp4 ", str(tmp_path)) == str(tmp_path / "clips" / "x.mp4")
@@ -209,7 +209,7 @@ def test_typed_paths_absolute_home_and_relative(tmp_path):
 
 
 def test_recent_files_most_recent_first_without_duplicates():
-    from app.viewer.state import push_recent
+    from stylize3d_app.viewer.state import push_recent
 
     r = ()
     for p in ("a.jpg", "b.jpg", "a.jpg", "c.jpg"):
@@ -254,7 +254,7 @@ def test_typed_paths_in_open_dialogs_must_name_an_existing_file(tmp_path, monkey
 
 
 def test_status_lines_fit_one_line():
-    from app.viewer.panel import LINE_CHAR_EM, fit_line
+    from stylize3d_app.viewer.panel import LINE_CHAR_EM, fit_line
 
     em = 16.0
     width = 40 * LINE_CHAR_EM * em  # 40 characters
@@ -280,7 +280,7 @@ class _CountingLabel:
 def test_status_line_leaves_unchanged_labels_alone():
     from types import SimpleNamespace
 
-    from app.viewer.panel import Panel, fit_line, set_if_changed
+    from stylize3d_app.viewer.panel import Panel, fit_line, set_if_changed
 
     label = _CountingLabel()
     assert set_if_changed(label, "text", "a") and not set_if_changed(label, "text", "a")

@@ -7,7 +7,7 @@ from typing import List
 
 import pytest
 
-from app.viewer.worker import ComputeWorker, RenderResult, should_deliver
+from stylize3d_app.viewer.worker import ComputeWorker, RenderResult, should_deliver
 
 TIMEOUT = 10.0
 

@@ -5,7 +5,7 @@ import json
 import cv2
 import pytest
 
-from app.cli import main
+from stylize3d_app.cli import main
 
 
 def _table(folder, name):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from app.cli import main
+from stylize3d_app.cli import main
 from stylize3d_core.bench.floor import conv_flops, decoder_work, interleaved_medians, kept_points, raster_work
 from stylize3d_core.geometry.camera import Cameras
 from stylize3d_core.models.decoder import DecoderConfig, UNetDecoder

@@ -4,7 +4,7 @@ import cv2
 import numpy as np
 import pytest
 
-from app.cli import main
+from stylize3d_app.cli import main
 from stylize3d_core.depth.sources import StereoCardDepth, parse_depth_spec
 from stylize3d_core.depth.stereo_card import CardSettings, card_depth, card_views, match_exposure
 from stylize3d_core.errors import InputError

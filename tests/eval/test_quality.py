@@ -344,7 +344,7 @@ def test_run_quality_writes_the_report(tmp_path):
 
 
 def test_bench_quality_command_refuses_a_missing_model(tmp_path, capsys):
-    from app.cli import main
+    from stylize3d_app.cli import main
 
     missing = tmp_path / "missing.safetensors"
     assert main(["bench", "quality", "--quick", "-q", "--out", str(tmp_path / "q"), "--model", str(missing)]) == 2

@@ -106,7 +106,7 @@ def untrained(tmp_path_factory):
 
 
 def test_mask_person_end_to_end(astronaut, untrained, tmp_path):
-    from app.cli import main
+    from stylize3d_app.cli import main
 
     photo = tmp_path / "astronaut.png"
     Image.fromarray(astronaut).resize((96, 96), Image.BILINEAR).save(photo)
@@ -127,7 +127,7 @@ def test_mask_person_end_to_end(astronaut, untrained, tmp_path):
 
 
 def test_mask_person_with_no_person_is_a_clear_error(untrained, tmp_path, capsys):
-    from app.cli import main
+    from stylize3d_app.cli import main
 
     photo = tmp_path / "rocket.png"
     Image.open(sample_photo("rocket.jpg")).resize((96, 64)).save(photo)
@@ -140,12 +140,12 @@ def test_mask_person_with_no_person_is_a_clear_error(untrained, tmp_path, capsys
 
 
 def test_viewer_person_item_makes_the_layers(untrained):
-    import app.viewer.applications as A
-    from app.viewer.session import ViewerSession
+    import stylize3d_app.viewer.applications as A
+    from stylize3d_app.viewer.session import ViewerSession
     from stylize3d_core.pipeline import PhotoSpec
 
-    from app.viewer.panel import MENU_RECENT_PHOTO, MENU_RECENT_STYLE
-    from app.viewer.settings import MAX_RECENT
+    from stylize3d_app.viewer.panel import MENU_RECENT_PHOTO, MENU_RECENT_STYLE
+    from stylize3d_app.viewer.settings import MAX_RECENT
 
     ids = {A.MENU_PERSON, A.MENU_GRABCUT, A.MENU_VIEWS, A.MENU_PATH_LOAD}
     recent = set(range(MENU_RECENT_PHOTO, MENU_RECENT_PHOTO + MAX_RECENT)) | \
@@ -170,8 +170,8 @@ def test_viewer_controller_person_item(untrained):
     import importlib.util
     from pathlib import Path
 
-    import app.viewer.applications as A
-    from app.viewer.session import ViewerSession
+    import stylize3d_app.viewer.applications as A
+    from stylize3d_app.viewer.session import ViewerSession
     from stylize3d_core.pipeline import PhotoSpec
 
     path = Path(__file__).parents[1] / "app" / "test_viewer_applications.py"

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import torch
 
-from app.cli import main
+from stylize3d_app.cli import main
 from stylize3d_core.bench import stress
 from stylize3d_core.io.images import save_image
 

