@@ -3,7 +3,7 @@
 Flat-coloured cards are pasted, apart from each other, in front of each test photo
 (``benchmarks/photos.py``: the bundled samples and three scikit-image photos) on a
 receding plane of depth; what the cards hide is the photo itself, so the LDI's hidden
-layer behind them can be scored against it. Prints, per ``inpaint_method``, the PSNR of
+layer behind them can be scored against it. Prints the PSNR of
 the hidden colour against the photo, on the hidden pixels within ``--near`` pixels of a
 card's outline (what the viewer's small moves uncover first) and on all of them (the
 layer is as wide as the camera range needs: here most of each card).
@@ -23,7 +23,6 @@ import numpy as np
 from benchmarks.photos import test_photos
 from stylize3d_core.scene.ldi import LDISettings, build_ldi
 
-METHODS = ("linear", "telea", "ns", "push_pull")
 
 
 def pasted_cards(size: int) -> Iterator[Tuple[str, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
@@ -60,23 +59,22 @@ def main() -> None:
     cases = list(pasted_cards(args.size))
     names = [c[0] for c in cases]
     print(f"hidden colour PSNR (dB) near the outline (<= {args.near:g} px) / over the whole hidden layer")
-    print(f"{'method':>10} " + " ".join(f"{n:>18}" for n in names) + f" {'all photos':>14}")
-    for method in METHODS:
-        settings = LDISettings(inpaint_method=method)
-        cells, near_se, all_se = [], [], []
-        for name, rgb, pasted, depth, cards in cases:
-            ldi = build_ldi(pasted, depth, settings)
-            region = ldi.photo_region
-            hidden = ldi.hidden_mask[region] & cards
-            inside = cv2.distanceTransform(cards.astype(np.uint8), cv2.DIST_L2, 5)
-            near = hidden & (inside <= args.near)
-            got = ldi.hidden_rgb[region]
-            se_near, se_all = (got[near] - rgb[near]) ** 2, (got[hidden] - rgb[hidden]) ** 2
-            near_se.append(se_near)
-            all_se.append(se_all)
-            cells.append(f"{psnr(se_near):6.2f} / {psnr(se_all):6.2f}")
-        total = f"{psnr(np.concatenate(near_se)):5.2f} / {psnr(np.concatenate(all_se)):5.2f}"
-        print(f"{method:>10} " + " ".join(f"{c:>18}" for c in cells) + f" {total:>14}")
+    print(" ".join(f"{n:>18}" for n in names) + f" {'all photos':>14}")
+    settings = LDISettings()
+    cells, near_se, all_se = [], [], []
+    for name, rgb, pasted, depth, cards in cases:
+        ldi = build_ldi(pasted, depth, settings)
+        region = ldi.photo_region
+        hidden = ldi.hidden_mask[region] & cards
+        inside = cv2.distanceTransform(cards.astype(np.uint8), cv2.DIST_L2, 5)
+        near = hidden & (inside <= args.near)
+        got = ldi.hidden_rgb[region]
+        se_near, se_all = (got[near] - rgb[near]) ** 2, (got[hidden] - rgb[hidden]) ** 2
+        near_se.append(se_near)
+        all_se.append(se_all)
+        cells.append(f"{psnr(se_near):6.2f} / {psnr(se_all):6.2f}")
+    total = f"{psnr(np.concatenate(near_se)):5.2f} / {psnr(np.concatenate(all_se)):5.2f}"
+    print(" ".join(f"{c:>18}" for c in cells) + f" {total:>14}")
 
 
 if __name__ == "__main__":

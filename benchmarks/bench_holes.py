@@ -79,8 +79,6 @@ def main() -> None:
     parser.add_argument("--bilinear", action="store_true", help="bilinear splats (no growth with magnification)")
     parser.add_argument("--no-stretch", action="store_true", help="splats grow with the magnification only")
     parser.add_argument("--photos", default="", help="comma-separated photo names (default: all)")
-    parser.add_argument("--border-hidden", choices=("default", "on", "off"), default="default",
-                        help="LDISettings.border_hidden (the hidden layer behind what the frame's edge cuts)")
     parser.add_argument("--depth-tolerance", type=float, default=PlainRenderSettings().depth_tolerance,
                         help="the renderer's z-test band; 1.0 keeps every tap (holes then are pure coverage gaps)")
     parser.add_argument("--ldi", action="append", default=[], metavar="NAME=VALUE",
@@ -91,8 +89,6 @@ def main() -> None:
     for item in args.ldi:
         key, _, value = item.partition("=")
         ldi_settings = dataclasses.replace(ldi_settings, **{key: ast.literal_eval(value)})
-    if args.border_hidden != "default":
-        ldi_settings = dataclasses.replace(ldi_settings, border_hidden=args.border_hidden == "on")
     depth_source = PriorDepth()
     print(f"{'photo':>18} {'size':>9} {'points':>9} {'ldi s':>6} {'range':>6} "
           f"{'viewer max %':>12} {'fwd dolly %':>11} {'traj max %':>10} {'full dolly %':>12}")

@@ -317,8 +317,8 @@ def test_bad_inputs_raise(case):
 
 @pytest.mark.parametrize(
     "kwargs",
-    [{"band": -0.1}, {"border": 2.0}, {"disparity_jump": 0.0}, {"inpaint_method": "fast"},
-     {"inpaint_radius": 0}, {"edge_min_px": 2.5}, {"island_area": float("nan")}],
+    [{"band": -0.1}, {"border": 2.0}, {"disparity_jump": 0.0}, {"hidden_depth": "fast"},
+     {"edge_min_px": 2.5}, {"island_area": float("nan")}],
 )
 def test_bad_settings_raise(kwargs):
     with pytest.raises(InputError):

@@ -35,7 +35,7 @@ Stage 3 of the pipeline (docs/architecture.md, "Pipeline stages"), after 3DPhoto
    only*: pixels near the edge, outside the band, farther than their nearest
    foreground edge by more than the jump, and more than ``edge_exclusion_px``
    from any tear (the pixels at a tear mix foreground and background colours).
-   Depth and colour (``hidden_depth="surface"``, ``inpaint_method="linear"``):
+   Depth and colour (``hidden_depth="surface"``):
    the local linear fit of ``nd`` (affine on a plane) and of the colour at a
    source, anchored at the source's own value where the fit explains its
    neighbourhood, continued to the pixel (steps capped at one jump and at
@@ -71,9 +71,8 @@ Stage 3 of the pipeline (docs/architecture.md, "Pipeline stages"), after 3DPhoto
 6. **Border.** The canvas is extended by ``pad`` pixels on every side (step 4).
    Colour: push-pull continuation of the photo (blur grows with the distance
    from the photo, no mirrored seams). Depth: the push-pull continuation of
-   ``nd``, never closer than the replicated photo-border pixel. With
-   ``border_hidden`` (default), where a foreground edge comes within ``pad`` of
-   the frame, border pixels whose layer 0 continues a foreground cut by the
+   ``nd``, never closer than the replicated photo-border pixel. Where a
+   foreground edge comes within ``pad`` of the frame, border pixels whose layer 0 continues a foreground cut by the
    frame's edge get a hidden sample: the photo's background alone continued
    the same way.
 

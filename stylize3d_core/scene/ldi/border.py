@@ -27,7 +27,7 @@ def _border(
     where it has none)."""
     rgb0, nd0 = _extend_border(rgb, nd, pad)
     outer = None
-    if pad > 0 and s.border_hidden and _edges_near_frame(fg, pad):
+    if pad > 0 and _edges_near_frame(fg, pad):
         outer = _border_hidden(rgb, nd, nd0, pad, s)
     return rgb0, nd0, outer
 

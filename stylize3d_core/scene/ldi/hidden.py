@@ -8,10 +8,9 @@ from typing import Optional, Tuple
 import cv2
 import numpy as np
 
-from ...io.images import to_uint8
 from ...threads import halves
 from .._fill import (ACROSS_REACH as _ACROSS_REACH, LinearFit, across_gap, anchored, box_clusters, continue_at,
-                     extrapolate, local_linear_fit, nearest_index, push_pull, scan_nearest, split_fit)
+                     extrapolate, local_linear_fit, nearest_index, scan_nearest, split_fit)
 from .layers import LDISettings
 from .silhouettes import _JOIN_CONTRAST, _JOIN_FOREGROUND, unmix_silhouette
 
@@ -41,6 +40,9 @@ continues when its own plane comes within this many ``disparity_jump`` of it (th
 a card where the wall runs on behind it; not where the ground has already turned away from it)."""
 
 
+_SOURCE_PAD = 3
+"""Pixels beyond a hidden band's reach in which background sources are gathered (each side)."""
+
 def _hidden_layer(
     rgb: np.ndarray, nd: np.ndarray, fg: np.ndarray, bg: np.ndarray, widths: np.ndarray, s: LDISettings
 ) -> Optional[Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
@@ -58,7 +60,6 @@ def _hidden_layer(
     t = s.disparity_jump
     edges = fg & (widths > 0)
     max_width = int(math.ceil(widths.max()))
-    flag = cv2.INPAINT_NS if s.inpaint_method == "ns" else cv2.INPAINT_TELEA
     ex = s.edge_exclusion_px
     exclusion = np.ones((2 * ex + 1, 2 * ex + 1), np.uint8)
 
@@ -68,13 +69,13 @@ def _hidden_layer(
     mask0 = np.zeros((h, w), bool)
     out_rgb0 = np.zeros((h, w, 3), np.float32)
     fore = np.zeros((h, w), np.float32)  # layer 0's new nd where a pixel joins the foreground (0 elsewhere)
-    for rows, cols, members in box_clusters(edges, max_width + 2 * s.inpaint_radius + ex + 4):
+    for rows, cols, members in box_clusters(edges, max_width + 2 * _SOURCE_PAD + ex + 4):
         ndc = nd[rows, cols]  # (h, w)
         rgbc = rgb[rows, cols]  # (h, w, 3)
         nearest_edge = nearest_index(members)  # (h, w)
         width = widths[rows, cols][members][nearest_edge]  # (h, w) width behind the nearest edge pixel
         band_px = int(math.ceil(width.max()))
-        reach = band_px + 2 * s.inpaint_radius + ex + 2  # background sources are looked for this far
+        reach = band_px + 2 * _SOURCE_PAD + ex + 2  # background sources are looked for this far
         not_edge = np.where(members, 0, 255).astype(np.uint8)
         dist = cv2.distanceTransform(not_edge, cv2.DIST_L2, 5)  # (h, w) to the nearest edge pixel
         ref = ndc[members][nearest_edge]  # (h, w) nd of the nearest foreground-edge pixel
@@ -108,17 +109,14 @@ def _hidden_layer(
         used = _used_sources(nearest, source, band | outside, scan)
         srcw = source.astype(np.float32)
         lo = 0.5 * float(ndc[source].min())  # never much farther than anything seen
-        want_nd, want_rgb = s.hidden_depth != "nearest", s.inpaint_method == "linear"
-        nd_fit = col_fit = None
-        if want_nd and want_rgb:  # one fit of the four channels (shared position moments)
+        nd_fit = None
+        if s.hidden_depth != "nearest":  # one fit of the four channels (shared position moments)
             values = np.concatenate([ndc[..., None], rgbc], axis=2)
             both = local_linear_fit(values, srcw, s.fit_sigma, ridge=(_DEPTH_RIDGE,) + (_COLOUR_RIDGE,) * 3,
                                     damp=(False, True, True, True), where=used)
             both = anchored(both, values, where=used)
             nd_fit, col_fit = split_fit(both, slice(0, 1)), split_fit(both, slice(1, 4))
-        elif want_nd:
-            nd_fit = local_linear_fit(ndc[..., None], srcw, s.fit_sigma, ridge=_DEPTH_RIDGE, where=used)
-        elif want_rgb:
+        else:
             col_fit = local_linear_fit(rgbc, srcw, s.fit_sigma, ridge=_COLOUR_RIDGE, damp=True, where=used)
         if nd_fit is not None:  # continue the background's local plane (nd is affine on it)
             bg_nd = np.maximum(extrapolate(nd_fit, nearest, source, _DEPTH_STEP * s.disparity_jump, band)[..., 0], lo)
@@ -139,14 +137,8 @@ def _hidden_layer(
         if chosen_rgb is not None:  # chosen with the surface
             colour = np.zeros(rgbc.shape, np.float32)
             colour[band] = chosen_rgb
-        elif col_fit is not None:  # the background's colour and its gradient continued
+        else:  # the background's colour and its gradient continued
             colour = np.clip(extrapolate(col_fit, nearest, source, s.max_colour_step, todo), 0.0, 1.0)
-        elif s.inpaint_method == "push_pull":  # a multi-scale blend of the background sources
-            colour = push_pull(rgbc, source.astype(np.float32))
-        else:
-            context = np.where(source[..., None], rgbc, rgbc[source][nearest])  # background-only colours
-            colour = cv2.inpaint(to_uint8(context), todo.astype(np.uint8), s.inpaint_radius, flag)
-            colour = colour.astype(np.float32) / 255.0
         sub_mask = mask[rows, cols]
         sub_mask |= band
         out_rgb[rows, cols][band] = colour[band]

@@ -75,14 +75,6 @@ class LDISettings:
     """Pixels this close to a tear (either side) never give colour to the hidden layer: they
     hold anti-aliased mixtures of foreground and background (and absorb small misalignments
     of the depth edge with the colour edge)."""
-    inpaint_radius: int = 3
-    """Neighbourhood radius of ``cv2.inpaint``, in pixels."""
-    inpaint_method: Literal["linear", "telea", "ns", "push_pull"] = "linear"
-    """Colour of the hidden layer: ``"linear"``: every hidden pixel continues the local linear
-    fit (colour and its gradient, over ``fit_sigma``) of its nearest background source, the
-    step limited to ``max_colour_step``; ``cv2.INPAINT_TELEA`` (fast marching) or
-    ``cv2.INPAINT_NS`` (Navier-Stokes) from the background sources; or ``"push_pull"``: their
-    multi-scale blend alone (smooth, no streaks)."""
     hidden_depth: Literal["surface", "plane", "nearest"] = "surface"
     """Depth of the hidden layer: ``"surface"`` (default): the surface that runs on behind the
     foreground, where the background sources on opposite sides of a hidden pixel (the nearest
@@ -100,13 +92,6 @@ class LDISettings:
     edge pixel)."""
     fit_sigma: float = 2.0
     """Radius (pixels) of the local linear fits of the background behind an edge."""
-    border_hidden: bool = True
-    """Give the border a hidden layer behind foreground that the frame's edge cuts (the
-    background continued past the frame), so a camera looking past the edge sees no hole
-    behind, e.g., a tower cut by the frame: rocket's holes at the dolly zoom's widened FOV
-    0.202 % -> 0.070 % (+11 % points). Only as wide as the border, which is sized for the
-    camera range; a smooth slanted surface reaching the frame's edge may get a needless
-    hidden layer there."""
     max_colour_step: float = 0.05
     """Largest change the colour's gradient may bring, per channel (in [0, 1] colour units)."""
     unmix_silhouettes: bool = True
@@ -140,15 +125,13 @@ class LDISettings:
         check_range(self.hidden_margin, "hidden_margin", 0.0, 10.0)
         check_range(self.hidden_margin_px, "hidden_margin_px", 0.0, 1000.0)
         check_range(self.edge_exclusion_px, "edge_exclusion_px", 0, 100)
-        check_range(self.inpaint_radius, "inpaint_radius", 1, 50)
-        check_choice(self.inpaint_method, "inpaint_method", ("linear", "telea", "ns", "push_pull"))
         check_choice(self.hidden_depth, "hidden_depth", ("surface", "plane", "nearest"))
         check_range(self.fit_sigma, "fit_sigma", 0.5, 50.0)
         check_range(self.max_colour_step, "max_colour_step", 0.0, 1.0)
         for name in ("unmix_silhouettes", "subpixel_silhouettes"):
             if not isinstance(getattr(self, name), bool):
                 raise InputError(name, f"expected a bool, got {getattr(self, name)!r}")
-        for name in ("edge_min_px", "island_min_px", "inpaint_radius", "edge_exclusion_px"):
+        for name in ("edge_min_px", "island_min_px", "edge_exclusion_px"):
             if int(getattr(self, name)) != getattr(self, name):
                 raise InputError(name, f"must be an integer, got {getattr(self, name)!r}")
 
