@@ -23,7 +23,7 @@ from typing import Callable, Dict, List, Optional
 import numpy as np
 import torch
 
-from ..eval.quality import sharpness  # noqa: F401 (also this module's public name, as before)
+from ..eval.colour_stats import sharpness  # noqa: F401 (also this module's public name)
 from ..errors import InputError
 from .report import Log, progress, quiet, write_table
 

@@ -22,7 +22,7 @@ decode); the photo's geometry and encoding are not in it.
 :func:`choose` picks, from the rows, the fastest settings within an error
 target (previews >= 30 dB, final frames >= 40 dB PSNR against the reference).
 
-``skips``: what the caches save, measured (see ``stylize.py`` and ``scene/ldi.py``).
+``skips``: what the caches save, measured (see ``stylize.py`` and ``scene/ldi/``).
 """
 
 from __future__ import annotations
@@ -499,7 +499,7 @@ def _skips(out: Path, scene: SpeedScene, s, preset: SpeedPreset, cam, log: Log) 
     t_flat = median_time(lambda: Photo3D.build(rgb, flat), r, warmup=wu)
     t_edges = median_time(lambda: Photo3D.build(rgb, scene.photo3d.depth), r, warmup=wu)
     flat3d = Photo3D.build(rgb, flat)
-    rows.append({"change": "photo without depth edges", "skip": "no LDI inpainting (scene/ldi.py)",
+    rows.append({"change": "photo without depth edges", "skip": "no LDI inpainting (scene/ldi/)",
                  "holds": not flat3d.ldi.inpainted, "with_skip_s": t_flat, "without_s": t_edges,
                  "speedup": t_edges / t_flat, "max_abs_diff": math.nan})
     cols = ["change", "skip", "holds", "with_skip_s", "without_s", "speedup", "max_abs_diff", "psnr_db"]

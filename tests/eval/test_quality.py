@@ -15,9 +15,10 @@ from stylize3d_core.errors import InputError
 from stylize3d_core.eval.consistency import consistency_metrics, long_range_pairs, short_range_pairs
 from stylize3d_core.eval.quality import (
     GROUPS, METHODS, METRICS, QUALITY_PHOTOS, QUALITY_STYLES, SHEET_COLUMNS, QualityPhoto, QualityPreset,
-    QualityStyle, baked_colours, baked_renderer, contact_sheet, lab_distance, lab_stats, measure_pair, pair_group, render_methods, sharpness, sharpness_ratio, srgb_to_lab, summarize,
+    QualityStyle, baked_colours, baked_renderer, contact_sheet, measure_pair, pair_group, render_methods, summarize,
     view_geometries, warp_rmse,
 )
+from stylize3d_core.eval.colour_stats import lab_distance, lab_stats, sharpness, sharpness_ratio, srgb_to_lab
 from stylize3d_core.geometry.trajectories import TrajectorySettings, make_trajectory
 from stylize3d_core.render.plain import PlainRenderer
 from stylize3d_core.scene.layer_images import hidden_layer_image, layer_colours

@@ -659,7 +659,7 @@ def test_anchored_fit_starts_from_the_source_value_on_smooth_signals_only():
 
 
 def test_across_gap_follows_slanted_stripes_and_reads_sources_only():
-    from stylize3d_core.scene._fill import across_gap
+    from stylize3d_core.scene.ldi.isophotes import across_gap
 
     y, x = np.mgrid[:60, :80].astype(np.float64)
     # stripes whose isophotes climb 0.06 rows a column (2.5 rows across the gap, less than half a period)

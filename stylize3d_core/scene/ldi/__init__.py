@@ -81,7 +81,7 @@ Coordinates: canvas pixel ``(i, j)`` is photo pixel ``(i - pad, j - pad)``.
 The package: :mod:`.layers` (the labels, :class:`LDISettings`, :class:`LDI`), :mod:`.build`
 (:func:`build_ldi`, the coverage of each edge), :mod:`.tear` (the depth edges), :mod:`.hidden` (the
 hidden layer's depth and colour), :mod:`.silhouettes` (mixed pixels at the foreground's outline) and
-:mod:`.border` (the photo extended beyond its frame).
+:mod:`.border` (the photo extended beyond its frame), :mod:`.isophotes` (colour matched across a gap).
 """
 
 from .build import build_ldi

@@ -9,8 +9,9 @@ import cv2
 import numpy as np
 
 from ...threads import halves
-from .._fill import (ACROSS_REACH as _ACROSS_REACH, LinearFit, across_gap, anchored, box_clusters, continue_at,
-                     extrapolate, local_linear_fit, nearest_index, scan_nearest, split_fit)
+from .._fill import (LinearFit, anchored, box_clusters, continue_at, extrapolate, local_linear_fit, nearest_index,
+                     scan_nearest, split_fit)
+from .isophotes import ACROSS_REACH as _ACROSS_REACH, across_gap
 from .layers import LDISettings
 from .silhouettes import _JOIN_CONTRAST, _JOIN_FOREGROUND, unmix_silhouette
 
@@ -280,7 +281,7 @@ def _follow_isophotes(
 ) -> None:
     """Recolour, in place, the band pixels (``br``, ``bc``) that take a surface their row's or column's
     agreeing pair continues (``found``): with the colours where the texture's isophotes through them
-    meet the gap's two sides (:func:`~._fill.across_gap`), not the pair's colours continued straight
+    meet the gap's two sides (:func:`~.isophotes.across_gap`), not the pair's colours continued straight
     along the row or column. A pixel both pairs cover blends the two by inverse squared gap width.
 
     The row (column) just beside those, between the same two sides' neighbours, whose pixels continue
