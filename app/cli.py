@@ -85,6 +85,31 @@ def _add_info(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--json", action="store_true", help="print the report as JSON")
 
 
+def _add_models(sub: "argparse._SubParsersAction") -> None:
+    p = sub.add_parser("models", help="optional models that are not shipped: download them once")
+    msub = p.add_subparsers(dest="models_command", required=True)
+    d = msub.add_parser("download", help="download an optional model's weights (needs the network, once)",
+                        description="Download the weights of an optional model into the Hugging Face cache, "
+                                    "from a pinned revision, with a progress bar; later runs are offline.")
+    d.add_argument("model", choices=("depth-anything",),
+                   help="depth-anything: Depth Anything V2 Small (Apache-2.0, about 99 MB; needs the depth extra: "
+                        "pip install 'stylize3d[depth]')")
+
+
+def _models(args: argparse.Namespace) -> int:
+    from stylize3d_core.depth import depth_anything
+
+    folder = depth_anything.cached_folder()
+    if folder is not None:
+        print(f"{PROG}: {depth_anything.MODEL_ID} at {depth_anything.REVISION[:12]} is already in {folder}",
+              file=sys.stderr)
+        return 0
+    folder = depth_anything.download()
+    print(f"{PROG}: {depth_anything.MODEL_ID} at {depth_anything.REVISION[:12]} saved in {folder}; "
+          "use --depth depth-anything (auto uses it from now on)", file=sys.stderr)
+    return 0
+
+
 BENCH_SUITES = ("speed", "consistency", "scaling", "stress", "skips", "targets", "floor", "quality")
 
 
@@ -118,6 +143,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_render(sub)
     _add_training(sub)
     _add_info(sub)
+    _add_models(sub)
     _add_bench(sub)
     return parser
 
@@ -308,7 +334,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     shown, warnings.showwarning = warnings.showwarning, show_warning
     try:
         handlers = {"render": _render, "prepare-data": _prepare_data, "prepare-styles": _prepare_styles,
-                    "prepare-teacher": _prepare_teacher, "train": _train, "info": _info, "bench": _bench}
+                    "prepare-teacher": _prepare_teacher, "train": _train, "info": _info, "bench": _bench,
+                    "models": _models}
         return handlers[args.command](args)
     except InputError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)

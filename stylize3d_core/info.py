@@ -139,6 +139,16 @@ def _data() -> Report:
     }
 
 
+def _depth_anything() -> Report:
+    from .depth import depth_anything as da
+
+    folder = da.cached_folder()
+    return {"model": da.MODEL_ID, "revision": da.REVISION, "transformers": _dist_version("transformers"),
+            "weights_cached": folder is not None, "folder": None if folder is None else str(folder),
+            "detail": ("ready: --depth depth-anything (auto uses it)" if folder is not None and da.available()
+                       else "not ready: " + (da.EXTRA_HINT if not da.available() else da.DOWNLOAD_HINT))}
+
+
 def collect() -> Report:
     """Everything ``stylize3d info`` prints, as a JSON-serialisable dict."""
     import stylize3d_core
@@ -157,6 +167,7 @@ def collect() -> Report:
         "ffmpeg": _guard(_ffmpeg),
         "cpus": _guard(_cpus),
         "data": _guard(_data),
+        "depth_anything": _guard(_depth_anything),
         "display": _guard(display_status),
         "gpu": _guard(_gpu),
     }

@@ -60,7 +60,8 @@ class PhotoSpec:
     photo: Optional[str] = option(None, help="the photo: JPEG, PNG, WebP or TIFF.", metavar="PHOTO")
     depth: str = option(
         "auto", metavar="SPEC",
-        help="where depth comes from: auto (phone depth, else the built-in prior), prior, phone, a depth file "
+        help="where depth comes from: auto (phone depth, else depth-anything where its weights are cached, else the "
+             "built-in prior), prior, depth-anything, phone, a depth file "
              "(PNG16/NPY/PFM/TIFF/EXR; append :disparity for disparity), onnx:MODEL.onnx, stereo:RIGHT_IMAGE, "
              "stereo:sbs (see stylize3d_core/depth/sources.py).")
     refine_depth: Optional[str] = option(

@@ -17,10 +17,11 @@ from stylize3d_core.geometry.trajectories import TrajectoryName
 from .state import VideoExport, ViewState
 
 DEPTH_CHOICES: Tuple[Tuple[str, str], ...] = (
-    ("auto", "auto (phone depth, else built-in prior)"),
+    ("auto", "auto (phone, Depth Anything if downloaded, else prior)"),
     ("prior", "built-in prior"),
     ("phone", "phone depth (XMP)"),
     ("stereo:sbs", "side-by-side stereo card"),
+    ("depth-anything", "Depth Anything V2 (learned)"),
 )
 """Depth sources offered in the picker: (spec, label). A depth file is chosen with "Depth file..."."""
 

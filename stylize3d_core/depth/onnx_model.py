@@ -115,6 +115,26 @@ class OnnxSettings:
         check_range(self.threads, "threads", 0, 256)
 
 
+def inverse_depth_map(raw: np.ndarray, shape: Tuple[int, int], far_ratio: float, source: str,
+                      path: PathLike) -> DepthMap:
+    """A network's relative inverse depth (h, w) -> a "relative" :class:`DepthMap` at ``shape`` (H, W): resized
+    bilinearly, its 1st / 99th percentiles taken as the farthest / nearest point and mapped onto depth in
+    [1, ``far_ratio``] (see the module docstring); non-finite pixels invalid and filled from neighbours.
+    ``path`` names the model in errors."""
+    out = cv2.resize(np.asarray(raw, np.float32), (shape[1], shape[0]), interpolation=cv2.INTER_LINEAR)
+    valid = np.isfinite(out)
+    if not valid.any():
+        raise InputError(path, "model output has no finite value")
+    lo, hi = np.percentile(out[valid], [1.0, 99.0])
+    if not hi - lo > 1e-12 * max(1.0, abs(hi)):
+        raise InputError(path, f"model output is constant ({hi:g}); it gives no depth (check the preset)")
+    n = np.where(valid, (out - lo) / (hi - lo), 0.0)
+    depth = nearness_to_depth(n, far_ratio)
+    if not valid.all():
+        depth = fill_nearest(depth, valid)
+    return DepthMap(depth, valid, "relative", source)
+
+
 def preset_by_name(name: str) -> OnnxPreset:
     """The preset called ``name`` (one of :data:`PRESETS`), or an InputError listing them."""
     return PRESETS[check_choice(name, "onnx preset", tuple(PRESETS))]
@@ -215,22 +235,11 @@ class OnnxDepthModel:
     def to_depth(self, raw: np.ndarray, shape: Tuple[int, int]) -> DepthMap:
         """Network output (h, w) -> DepthMap at the photo's ``shape`` (see the module docstring)."""
         p = self.settings.preset
-        out = cv2.resize(raw, (shape[1], shape[0]), interpolation=cv2.INTER_LINEAR)
-        finite = np.isfinite(out)
         source = f"onnx:{os.path.basename(self.path)}"
         if p.output == "inverse_depth":
-            valid = finite
-            if not valid.any():
-                raise InputError(self.path, "model output has no finite value")
-            lo, hi = np.percentile(out[valid], [1.0, 99.0])
-            if not hi - lo > 1e-12 * max(1.0, abs(hi)):
-                raise InputError(self.path, f"model output is constant ({hi:g}); it gives no depth (check the preset)")
-            n = np.where(valid, (out - lo) / (hi - lo), 0.0)
-            depth = nearness_to_depth(n, self.settings.far_ratio)
-            if not valid.all():
-                depth = fill_nearest(depth, valid)
-            return DepthMap(depth, valid, "relative", source)
-        valid = finite & (out > 0)
+            return inverse_depth_map(raw, shape, self.settings.far_ratio, source, self.path)
+        out = cv2.resize(raw, (shape[1], shape[0]), interpolation=cv2.INTER_LINEAR)
+        valid = np.isfinite(out) & (out > 0)
         if not valid.any():
             raise InputError(
                 self.path, "model output has no positive finite depth (is it inverse depth? check the preset)"

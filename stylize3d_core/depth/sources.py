@@ -10,10 +10,14 @@ same (H, W): depth finite and > 0 everywhere, a validity mask, and its kind
 =================================  =================================================
 spec (command line ``--depth``)     source
 =================================  =================================================
-``auto``                            :class:`AutoDepth`: phone depth if embedded, else the prior
+``auto``                            :class:`AutoDepth`: phone depth if embedded, else Depth Anything
+                                    where its weights are cached, else the prior
 ``prior``                           :class:`PriorDepth`: built-in prior, no weights
 ``phone``                           :class:`PhoneDepth`: depth embedded by a phone camera
 ``FILE`` / ``FILE:disparity``       :class:`FileDepth`: a depth (default) or disparity file
+``depth-anything[:FOLDER]``          :class:`DepthAnythingDepth`: Depth Anything V2 Small through
+                                    Transformers (:mod:`.depth_anything`; the ``depth`` extra and
+                                    ``stylize3d models download depth-anything``)
 ``onnx:MODEL.onnx[:PRESET]``        :class:`OnnxDepth`: a depth network in ONNX (presets
                                     in ``onnx_model.PRESETS``; default "midas")
 ``stereo:RIGHT``                    :class:`StereoDepth`: the photo is the left view
@@ -50,7 +54,8 @@ from .stereo_card import CardSettings, card_depth
 from .types import DepthMap, PhotoDepth
 
 SPEC_HELP = (
-    "auto, prior, phone, FILE, FILE:disparity, onnx:MODEL.onnx[:PRESET], stereo:RIGHT_IMAGE, stereo:sbs[:cross], "
+    "auto, prior, depth-anything, phone, FILE, FILE:disparity, onnx:MODEL.onnx[:PRESET], stereo:RIGHT_IMAGE, "
+    "stereo:sbs[:cross], "
     "stereo:card[:cross]"
 )
 
@@ -134,6 +139,33 @@ class OnnxDepth(DepthSource):
 
     def describe(self) -> str:
         return f"ONNX model {self.model.path}"
+
+
+class DepthAnythingDepth(DepthSource):
+    """Depth Anything V2 Small through Transformers (:mod:`.depth_anything`), loaded on first use."""
+
+    def __init__(self, folder: Optional[PathLike] = None) -> None:
+        from . import depth_anything
+
+        depth_anything._transformers()  # a missing extra is an error now, not at the first photo
+        if folder is None and depth_anything.cached_folder() is None:
+            raise InputError(depth_anything.SPEC, f"the weights of {depth_anything.MODEL_ID} are not in the "
+                                                  f"Hugging Face cache: {depth_anything.DOWNLOAD_HINT}")
+        self.folder = folder
+        self._model = None
+
+    def estimate(self, image: LoadedImage) -> PhotoDepth:
+        from .depth_anything import DepthAnythingModel
+
+        rgb = _check_image(image).rgb
+        if self._model is None:
+            self._model = DepthAnythingModel(self.folder)
+        return PhotoDepth(rgb, self._model.estimate(rgb))
+
+    def describe(self) -> str:
+        from .depth_anything import MODEL_ID
+
+        return f"Depth Anything V2 Small ({self.folder or MODEL_ID})"
 
 
 class StereoDepth(DepthSource):
@@ -228,7 +260,11 @@ class AutoDepth(DepthSource):
     """
 
     def __init__(self, prior: PriorSettings = PriorSettings()) -> None:
+        from . import depth_anything
+
         self.prior = PriorDepth(prior)
+        learned = depth_anything.cached_folder() is not None and depth_anything.available()  # no import without
+        self.fallback: DepthSource = DepthAnythingDepth() if learned else self.prior
 
     def estimate(self, image: LoadedImage) -> PhotoDepth:
         image = _check_image(image)
@@ -239,10 +275,12 @@ class AutoDepth(DepthSource):
                 raise InputError(exc.source, f"{exc.problem} (use --depth prior to ignore the embedded depth)") from exc
             if found is not None:
                 return PhotoDepth(image.rgb, found)
-        return self.prior.estimate(image)
+        return self.fallback.estimate(image)
 
     def describe(self) -> str:
-        return "auto (phone depth, else the built-in prior)"
+        if isinstance(self.fallback, DepthAnythingDepth):
+            return "auto (phone depth, else Depth Anything V2 Small: its weights are cached)"
+        return "auto (phone depth, else the built-in prior: Depth Anything's weights are not cached)"
 
 
 class RefinedDepth(DepthSource):
@@ -288,6 +326,11 @@ def parse_depth_spec(spec: str, *, refine: Optional[RefineSettings] = None) -> D
         source = PriorDepth()
     elif s == "phone":
         source = PhoneDepth()
+    elif s == "depth-anything" or s.startswith("depth-anything:"):
+        folder = s[len("depth-anything:"):] if ":" in s else None
+        if folder is not None and not os.path.isdir(folder):
+            raise InputError(folder, "depth-anything: needs a folder saved with save_pretrained (not found)")
+        source = DepthAnythingDepth(folder)
     elif s.startswith("onnx:"):
         rest = s[len("onnx:"):]
         if not rest:
