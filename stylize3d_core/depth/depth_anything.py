@@ -46,7 +46,6 @@ EXTRA_HINT = "install the optional extra: pip install 'stylize3d[depth]' (or use
 
 def _transformers():
     try:
-        import transformers  # noqa: F401
         from transformers import AutoImageProcessor, AutoModelForDepthEstimation
     except ImportError:
         raise InputError(SPEC, f"needs Hugging Face Transformers, which is not installed: {EXTRA_HINT}") from None
@@ -81,6 +80,14 @@ def cached_folder(model_id: str = MODEL_ID, revision: str = REVISION) -> Optiona
     return folder if (folder / "config.json").is_file() else None
 
 
+def require_weights() -> Path:
+    """:func:`cached_folder`, or the :class:`~stylize3d_core.errors.InputError` that names the command to run."""
+    folder = cached_folder()
+    if folder is None:
+        raise InputError(SPEC, f"the weights of {MODEL_ID} are not in the Hugging Face cache: {DOWNLOAD_HINT}")
+    return folder
+
+
 def download(model_id: str = MODEL_ID, revision: str = REVISION) -> Path:
     """Fetch the pinned weights into the Hugging Face cache (progress bars on stderr); the folder.
 
@@ -110,11 +117,7 @@ class DepthAnythingModel:
     def __init__(self, folder: Optional[PathLike] = None, far_ratio: float = FAR_RATIO) -> None:
         processor_cls, model_cls = _transformers()
         if folder is None:
-            found = cached_folder()
-            if found is None:
-                raise InputError(SPEC, f"the weights of {MODEL_ID} are not in the Hugging Face cache: "
-                                       f"{DOWNLOAD_HINT}")
-            folder = found
+            folder = require_weights()
         self.folder = Path(folder)
         if not (self.folder / "config.json").is_file():
             raise InputError(self.folder, "not a saved depth model (no config.json in the folder)")
@@ -139,4 +142,5 @@ class DepthAnythingModel:
         return inverse_depth_map(raw, photo.shape[:2], self.far_ratio, SPEC, self.folder)
 
 
-__all__ = ["MODEL_ID", "REVISION", "SPEC", "DepthAnythingModel", "available", "cached_folder", "download"]
+__all__ = ["MODEL_ID", "REVISION", "SPEC", "DepthAnythingModel", "available", "cached_folder", "download",
+           "require_weights"]

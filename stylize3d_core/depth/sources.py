@@ -147,10 +147,9 @@ class DepthAnythingDepth(DepthSource):
     def __init__(self, folder: Optional[PathLike] = None) -> None:
         from . import depth_anything
 
-        depth_anything._transformers()  # a missing extra is an error now, not at the first photo
-        if folder is None and depth_anything.cached_folder() is None:
-            raise InputError(depth_anything.SPEC, f"the weights of {depth_anything.MODEL_ID} are not in the "
-                                                  f"Hugging Face cache: {depth_anything.DOWNLOAD_HINT}")
+        depth_anything._transformers()  # a missing extra or missing weights are errors now, not at the first photo
+        if folder is None:
+            depth_anything.require_weights()
         self.folder = folder
         self._model = None
 
