@@ -85,10 +85,17 @@ class PriorSettings:
     """Weight of the defocus cue."""
     foreground: bool = True
     """Find a salient foreground object with GrabCut and pop it out."""
-    foreground_pop: float = 0.2
+    foreground_pop: float = 0.1
     """Least nearness gap between a foreground object and the background around it."""
-    bulge: float = 0.08
-    """Extra nearness at the centre of a foreground object (rounded, not a flat card)."""
+    bulge: float = 0.12
+    """Rounding of a foreground object: its outline sits this much below its ground contact, its
+    middle this much above (by the square root of the distance from the outline)."""
+    min_confidence: float = 0.35
+    """Objects the prior is less sure of than this (see :func:`.foreground.object_confidence`) are
+    not lifted: they keep the smooth background depth."""
+    open_ramp: float = 0.1
+    """Nearness at the top edge of a photo with no sky (an aerial or downward view, a close-up, a
+    wall): its layout is one smooth ramp from this at the top to 1 at the bottom."""
     min_object_area: float = 0.01
     """Foreground objects smaller than this fraction of the photo are dropped."""
     min_edge_contrast: float = 8.0
@@ -115,6 +122,8 @@ class PriorSettings:
         check_range(self.defocus_weight, "defocus_weight", 0.0, 1.0)
         check_range(self.foreground_pop, "foreground_pop", 0.0, 1.0)
         check_range(self.bulge, "bulge", 0.0, 1.0)
+        check_range(self.min_confidence, "min_confidence", 0.0, 1.0)
+        check_range(self.open_ramp, "open_ramp", 0.0, 1.0)
         check_range(self.min_object_area, "min_object_area", 0.0, 1.0)
         check_range(self.min_edge_contrast, "min_edge_contrast", 0.0, 200.0)
         check_range(self.max_foreground_area, "max_foreground_area", 0.0, 1.0)
@@ -222,6 +231,12 @@ def _layout_nearness(h: int, w: int, horizon: float, backdrop: float) -> np.ndar
     return np.repeat(col[:, None], w, axis=1)
 
 
+def _ramp_nearness(h: int, w: int, top: float) -> np.ndarray:
+    """Nearness (h, w) growing linearly from ``top`` at the top edge to 1 at the bottom."""
+    y = (np.arange(h, dtype=np.float32) + 0.5) / h
+    return np.repeat((top + (1.0 - top) * y)[:, None], w, axis=1)
+
+
 def _guided(guide: np.ndarray, src: np.ndarray, radius: int, eps: float) -> np.ndarray:
     if radius < 1:
         return src
@@ -247,7 +262,11 @@ def estimate_prior(rgb: np.ndarray, settings: PriorSettings = PriorSettings()) -
     texture = _texture(grey)
     sky = sky_mask(small, texture)
     horizon = s.horizon if s.horizon is not None else estimate_horizon(sky, s.default_horizon)
-    layout = _layout_nearness(h, w, horizon, s.backdrop_nearness)  # (h, w)
+    open_view = s.horizon is None and sky.mean() < 0.05
+    if open_view:  # no sky, no horizon: one smooth ramp, no kink at an assumed horizon
+        layout = _ramp_nearness(h, w, s.open_ramp)
+    else:
+        layout = _layout_nearness(h, w, horizon, s.backdrop_nearness)  # (h, w)
     focus = focus_measure(grey, max(h, w) / 50)
 
     outdoor = float(np.clip(sky.mean() / 0.15, 0.0, 1.0))
@@ -279,7 +298,7 @@ def estimate_prior(rgb: np.ndarray, settings: PriorSettings = PriorSettings()) -
             lab = cv2.cvtColor(cv2.GaussianBlur(small, (0, 0), 1.5), cv2.COLOR_RGB2Lab)  # (h, w, 3)
             obj_values, kept = foreground_objects(
                 fg, background, layout, lab, min_area=s.min_object_area, min_edge_contrast=s.min_edge_contrast,
-                pop=s.foreground_pop, bulge=s.bulge,
+                pop=s.foreground_pop, bulge=s.bulge, saliency=sal, min_confidence=s.min_confidence,
             )
             fg_small = kept.astype(np.float32)
     # Full resolution: upsample, snap the object outlines to the photo's edges.
@@ -287,7 +306,9 @@ def estimate_prior(rgb: np.ndarray, settings: PriorSettings = PriorSettings()) -
     matte = np.zeros((H, W), bool)
     if fg_small.any():
         snap = max(2, round(1.5 * max(H, W) / max(gh, gw)))
-        matte = snap_mask_to_edges(resize_to(fg_small, (H, W)), photo, snap, s.edge_sigma_color)
+        # a smooth soft mask (no staircase from the small copies) for the snap to move onto the edges
+        soft = cv2.GaussianBlur(fg_small, (0, 0), 1.0)
+        matte = snap_mask_to_edges(resize_to(soft, (H, W)), photo, snap, s.edge_sigma_color)
         near_full = np.where(matte, resize_to(obj_values, (H, W)), near_full)
     peak = float(near_full.max())
     near_full = np.clip(near_full / max(peak, 1.0), 0.0, 1.0).astype(np.float32)
