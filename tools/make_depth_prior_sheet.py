@@ -60,11 +60,11 @@ PHOTOS = {
 }
 """Photos of the shared set (file name -> what it shows)."""
 
-TILE_W = 232
+TILE_W = 212
 COLUMNS = 4
 
 
-TILE_H = 160
+TILE_H = 146
 
 
 def tile(img: np.ndarray, width: int = TILE_W, height: int = 0) -> np.ndarray:

@@ -9,42 +9,49 @@ an inverse depth in [0, 1] where 1 is nearest:
    above the horizon that are not sky stand at a constant "backdrop" distance.
 2. **Sky / flat backdrop.** Low-texture regions touching the top edge (sky, a
    plain wall, a studio background) are the farthest thing in the photo. They
-   also give the horizon (where the sky ends); without them the horizon is
-   assumed at ``default_horizon`` (0.45 of the height).
+   also give the horizon (where the sky ends). A photo with (almost) no sky --
+   an aerial or downward view, a close-up, a wall -- has no horizon to find:
+   its layout is one smooth ramp from ``open_ramp`` at the top to 1 at the bottom.
 3. **Haze** (outdoor scenes only, weighted by how much sky there is): the
    dark-channel prior (He et al. 2009) gives the transmission ``t``; ``-log t``
    grows with distance.
 4. **Defocus.** Sharp regions are near the focal plane, which in most photos
    is on the subject; blurred ones are farther. Measured by the re-blur
    gradient ratio (contrast-independent), with a small weight.
-5. **Salient foreground** (:mod:`.foreground`). Saliency (OpenCV spectral
-   residual + colour contrast against the photo's border + a centre prior)
-   seeds GrabCut on a ~200 px copy; ground taken for foreground is removed,
-   holes and narrow gaps are closed; each object stands on the ground at its
-   lowest pixel in each column (Hoiem's "pop-up" rule) and at least
-   ``foreground_pop`` nearer than the background around it, with a rounded
-   bulge so it is not a flat card. Objects whose outline shows no colour step
-   (GrabCut cut through a uniform region) are dropped: a depth edge there would
-   tear the 3D photo where the photo shows no edge.
+5. **Salient foreground** (:mod:`.foreground`), only where the prior is sure.
+   Saliency (OpenCV spectral residual + colour contrast against the photo's
+   border + a centre prior) seeds GrabCut on a ~200 px copy; ground taken for
+   foreground is removed, holes and narrow gaps are closed. Each blob gets a
+   confidence (:func:`.foreground.object_confidence`: its area, the frame edges
+   it touches, the colour step across its outline, its saliency against the
+   rest; ground-shaped blobs -- a road or a deck narrowing into the distance --
+   get 0). Blobs below ``min_confidence`` are not lifted: they keep the smooth
+   background, so a slope, an aerial view or a blob GrabCut cut out of one
+   surface stays smooth instead of becoming a flat card. A lifted object stands
+   on the ground at its lowest pixel in each column (Hoiem's "pop-up" rule), a
+   gap nearer than the background around it, and is rounded by the square root
+   of the distance from its outline (outline below the ground contact, middle
+   above), gap and rounding scaled by its confidence.
 6. **Edges.** Object outlines are snapped to the photo's colour edges at full
    resolution by a joint-bilateral majority vote (the bilateral median of a
-   binary mask), so depth edges stay sharp steps; the smooth background cues
+   binary mask) of the smoothed soft mask, so depth edges stay sharp steps
+   on the photo's edges, not on the small copy's pixel staircase; the smooth background cues
    go through a guided filter (``cv2.ximgproc.guidedFilter``).
 
 Nearness becomes depth with ``depth = 1 / (1/far_ratio + (1 - 1/far_ratio) n)``,
 so depth lies in [1, far_ratio] (default 6), kind "relative": always finite and
 positive, whatever the photo (constant, tiny, noisy, out-of-range values).
 
-Where it fails: it never knows absolute scale; photos looking steeply down (a
-table top from above reads as a receding floor -- often right) or up (a ceiling
-is not modelled); tilted horizons; several subjects at different depths (each
-stands at its lowest pixel, which is wrong for floating or cropped objects, and
-GrabCut may join a subject with similar-coloured things behind it, e.g. the
-motorcycle with the red crates on the shelf); subjects that fill the frame (a
-close-up cat: only the most salient part pops out, the rest follows the ground
-gradient); a low-texture subject touching the top edge (taken for sky);
-subjects coloured like the photo's border; night scenes (no haze cue). The
-contact sheet ``docs/depth_contact_sheet.png`` shows it on the bundled samples.
+Where it fails: it never knows absolute scale; photos looking up (a ceiling
+is not modelled); tilted horizons; several subjects at different depths;
+GrabCut joining a subject with similar-coloured things behind it (the
+motorcycle with the red crates on the shelf) or with the ground beside it (a
+sign on a plain lifted with a slab of the plain); a dark low-texture region
+reaching the top edge (a bridge's ceiling, a night sky over a dark city) taken
+for sky, with a step at its edge; subjects the confidence refuses (a lighthouse
+whose blob takes in the rocks across the frame, a ferris wheel spanning the
+bottom): they stay in the smooth background, flat but not torn. The sheet
+``docs/depth_prior_sheet.png`` shows it on real photos.
 """
 
 from __future__ import annotations
