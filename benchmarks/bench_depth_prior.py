@@ -18,14 +18,9 @@ checkout's. Prints figures; asserts nothing.
 from __future__ import annotations
 
 import argparse
-import sys
-from pathlib import Path
 
 import cv2
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from prior_before import BEFORE_REV, load_prior_at  # noqa: E402
 from stylize3d_core.depth import prior as prior_after  # noqa: E402

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
+import importlib.util
 from pathlib import Path
 from typing import List
 
@@ -30,12 +30,20 @@ import cv2
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "benchmarks"))
-sys.path.insert(0, str(ROOT / "tools"))
 
-from make_contact_sheet import colour_depth, label  # noqa: E402  (tools/ is on sys.path as the script's folder)
-from prior_before import BEFORE_REV, load_prior_at  # noqa: E402
+
+def _load(path: Path):
+    """A script's module by its file (benchmarks/ is no package)."""
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+from make_contact_sheet import colour_depth, label  # noqa: E402  (tools/, the script's folder, is on sys.path)
+
+_before = _load(ROOT / "benchmarks" / "prior_before.py")
+BEFORE_REV, load_prior_at = _before.BEFORE_REV, _before.load_prior_at
 from stylize3d_core.depth import prior as prior_after  # noqa: E402
 from stylize3d_core.io.atomic import atomic_path  # noqa: E402
 from stylize3d_core.io.images import load_image  # noqa: E402
