@@ -9,7 +9,7 @@ resolution.
 
 from __future__ import annotations
 
-from typing import Tuple
+from typing import Optional, Tuple
 
 import cv2
 import numpy as np
@@ -140,6 +140,78 @@ def remove_ground(fg: np.ndarray, flat_tol: float = 0.03, min_run: float = 0.15)
     return out
 
 
+def _ramp(x: float, lo: float, hi: float) -> float:
+    """0 at ``lo``, 1 at ``hi``, linear between (``lo > hi`` gives a falling ramp)."""
+    return float(np.clip((x - lo) / (hi - lo), 0.0, 1.0))
+
+
+EDGE_TOUCH = 0.1
+"""An object touches the top, left or right frame edge when it covers more than this share of it."""
+BOTTOM_TOUCH = 0.8
+"""An object touches the bottom edge (as ground does) when it covers more than this share of it;
+objects standing on the ground usually reach the bottom over a part of it only."""
+
+
+def is_ground_shape(obj: np.ndarray) -> bool:
+    """Whether ``obj`` (h, w) bool has the shape of ground receding in perspective: wider than tall,
+    widening steadily downwards with no narrower neck under a wider part (not a head on shoulders),
+    its top third under 40 % as wide as its bottom third but its middle third at least 35 % as wide
+    (widening all the way, not a mast on a wide base like a rocket on its pad), and filling at most 65 % of its bounding
+    box (a triangle or trapezoid, not a block)."""
+    widths = obj.sum(axis=1).astype(np.float64)  # (h,)
+    rows = np.flatnonzero(widths)
+    cols = np.flatnonzero(obj.any(axis=0))
+    if rows.size < 6:
+        return False
+    height, width = rows[-1] - rows[0] + 1, cols[-1] - cols[0] + 1
+    prof = np.convolve(widths[rows[0]:rows[-1] + 1], np.ones(5) / 5, "same")
+    n = prof.size
+    upper = prof[: 2 * n // 3]
+    neck = float((np.maximum.accumulate(upper) - upper).sum() / max(upper.sum(), 1.0))
+    base = max(float(prof[-(n // 3):].mean()), 1.0)
+    taper = float(prof[: n // 3].mean()) / base
+    middle = float(prof[n // 3: 2 * n // 3].mean()) / base
+    fill = float(obj.sum()) / float(height * width)
+    return width >= 1.2 * height and neck < 0.02 and taper < 0.4 and middle >= 0.35 and fill <= 0.65
+
+
+def object_confidence(obj: np.ndarray, lab: np.ndarray, saliency: np.ndarray) -> Tuple[float, dict]:
+    """How sure (0..1) the prior is that ``obj`` (h, w) bool is an object standing out of the scene.
+
+    The product of four factors, each 1 when the object looks like a separate thing and 0 when it
+    looks like a piece of the scene's smooth layout:
+
+    * **area**: 1 up to 35 % of the photo, 0 from 70 % (a blob that large is the scene itself);
+    * **frame edges**: touching at most one frame edge is fine (a subject cropped at one side,
+      or standing on the bottom), two give 0.3, three or more 0 -- a blob running from the top
+      edge to a side edge is a slope or an aerial view's region, not an object;
+    * **outline contrast**: the median colour step across the outline (:func:`boundary_contrast`),
+      0 at Delta E 10, 1 from 20 -- an outline with no colour edge cuts through one surface;
+    * **saliency contrast**: mean saliency inside over mean saliency outside, 0 at 1.5, 1 from 2.5.
+
+    A blob that reaches the bottom and has the shape of ground seen in perspective
+    (:func:`is_ground_shape`: a road, a path, a bridge's deck) gets confidence 0.
+
+    Returns (confidence, the factors by name).
+    """
+    h, w = obj.shape
+    area = float(obj.mean())
+    touched = sum(float(e.mean()) > EDGE_TOUCH for e in (obj[0], obj[:, 0], obj[:, -1]))
+    touched += float(obj[-1].mean()) > BOTTOM_TOUCH
+    reaches_bottom = bool(obj[-1].any())
+    f_edges = (1.0, 1.0, 0.3)[touched] if touched < 3 else 0.0
+    contrast = boundary_contrast(obj, lab)
+    inside = float(saliency[obj].mean())
+    outside = float(saliency[~obj].mean()) if (~obj).any() else inside
+    sal_ratio = inside / max(outside, 1e-3)
+    ground = reaches_bottom and is_ground_shape(obj)
+    factors = {
+        "area": _ramp(area, 0.7, 0.35), "edges": f_edges, "contrast": _ramp(contrast, 10.0, 20.0),
+        "saliency": _ramp(sal_ratio, 1.5, 2.5), "ground": 0.0 if ground else 1.0,
+    }
+    return float(np.prod(list(factors.values()))), factors
+
+
 def foreground_objects(
     fg: np.ndarray,
     background: np.ndarray,
@@ -150,6 +222,8 @@ def foreground_objects(
     min_edge_contrast: float,
     pop: float,
     bulge: float,
+    saliency: Optional[np.ndarray] = None,
+    min_confidence: float = 0.0,
 ) -> Tuple[np.ndarray, np.ndarray]:
     """Per-object nearness (h, w) (defined everywhere, from the nearest object) and the kept mask (h, w).
 
@@ -162,13 +236,17 @@ def foreground_objects(
         min_edge_contrast: objects whose outline's colour step is below this are dropped.
         pop: least nearness gap between an object and the background around it.
         bulge: extra nearness at an object's centre.
+        saliency: (h, w) saliency for :func:`object_confidence`; None = every object is sure.
+        min_confidence: objects less sure than this are not lifted (they keep the smooth background).
 
     The ground is removed first (:func:`remove_ground`), small holes are filled,
     gaps of up to 20 % of the height between parts stacked vertically are
     closed, and pieces closer than ~2 % of the image are one object. Each column of an object
     stands on the ground at the object's lowest pixel in that column (smoothed
-    across columns), at least ``foreground_pop`` nearer than the background
-    around it (``pop``), plus a rounded bulge.
+    across columns), at least ``pop`` nearer than the background around it, and is rounded by
+    ``bulge`` times the square root of its distance from the outline (relative to the object's
+    largest): the outline sits on the ground contact, the middle stands out. Both the gap and the
+    rounding scale with the object's confidence, so a doubtful object is lifted less.
     """
     h, w = fg.shape
     fg = remove_ground(fg)
@@ -194,6 +272,12 @@ def foreground_objects(
         obj = labels == k
         if obj.sum() < min_area * h * w or boundary_contrast(obj, lab) < min_edge_contrast:
             continue
+        sure = 1.0
+        if saliency is not None:
+            sure, _ = object_confidence(obj, lab, saliency)
+            if sure < min_confidence or sure <= 0.0:
+                continue
+        lift = min(1.0, sure / 0.6) if saliency is not None else 1.0
         ring = cv2.dilate(obj.astype(np.uint8), ring_kernel).astype(bool) & ~fg
         around = float(np.percentile(background[ring], 90)) if ring.any() else float(background.max())
         cols = obj.any(axis=0)
@@ -201,10 +285,11 @@ def foreground_objects(
         bottom = np.interp(np.arange(w), np.flatnonzero(cols), bottom[cols])
         bottom = cv2.GaussianBlur(bottom[None, :].astype(np.float32), (0, 0), gap)[0]
         contact = layout[np.clip(np.round(bottom).astype(int), 0, h - 1), 0]  # (w,)
-        base = np.maximum(contact, min(1.0, around + pop))
-        dist = cv2.distanceTransform(obj.astype(np.uint8), cv2.DIST_L2, 5)
+        base = np.maximum(contact, min(1.0, around + lift * pop))
+        dist = cv2.distanceTransform(np.pad(obj.astype(np.uint8), 1, constant_values=1), cv2.DIST_L2, 5)[1:-1, 1:-1]
         dome = np.sqrt(dist / max(float(dist.max()), 1.0))
-        values[obj] = (base[None, :] + bulge * dome)[obj]
+        obj_near = base[None, :] - lift * bulge + 2.0 * lift * bulge * dome  # outline below base, middle above
+        values[obj] = np.maximum(obj_near, background + 0.5 * lift * pop)[obj]
         kept |= obj
     if not kept.any():
         return values, kept

@@ -9,42 +9,49 @@ an inverse depth in [0, 1] where 1 is nearest:
    above the horizon that are not sky stand at a constant "backdrop" distance.
 2. **Sky / flat backdrop.** Low-texture regions touching the top edge (sky, a
    plain wall, a studio background) are the farthest thing in the photo. They
-   also give the horizon (where the sky ends); without them the horizon is
-   assumed at ``default_horizon`` (0.45 of the height).
+   also give the horizon (where the sky ends). A photo with (almost) no sky --
+   an aerial or downward view, a close-up, a wall -- has no horizon to find:
+   its layout is one smooth ramp from ``open_ramp`` at the top to 1 at the bottom.
 3. **Haze** (outdoor scenes only, weighted by how much sky there is): the
    dark-channel prior (He et al. 2009) gives the transmission ``t``; ``-log t``
    grows with distance.
 4. **Defocus.** Sharp regions are near the focal plane, which in most photos
    is on the subject; blurred ones are farther. Measured by the re-blur
    gradient ratio (contrast-independent), with a small weight.
-5. **Salient foreground** (:mod:`.foreground`). Saliency (OpenCV spectral
-   residual + colour contrast against the photo's border + a centre prior)
-   seeds GrabCut on a ~200 px copy; ground taken for foreground is removed,
-   holes and narrow gaps are closed; each object stands on the ground at its
-   lowest pixel in each column (Hoiem's "pop-up" rule) and at least
-   ``foreground_pop`` nearer than the background around it, with a rounded
-   bulge so it is not a flat card. Objects whose outline shows no colour step
-   (GrabCut cut through a uniform region) are dropped: a depth edge there would
-   tear the 3D photo where the photo shows no edge.
+5. **Salient foreground** (:mod:`.foreground`), only where the prior is sure.
+   Saliency (OpenCV spectral residual + colour contrast against the photo's
+   border + a centre prior) seeds GrabCut on a ~200 px copy; ground taken for
+   foreground is removed, holes and narrow gaps are closed. Each blob gets a
+   confidence (:func:`.foreground.object_confidence`: its area, the frame edges
+   it touches, the colour step across its outline, its saliency against the
+   rest; ground-shaped blobs -- a road or a deck narrowing into the distance --
+   get 0). Blobs below ``min_confidence`` are not lifted: they keep the smooth
+   background, so a slope, an aerial view or a blob GrabCut cut out of one
+   surface stays smooth instead of becoming a flat card. A lifted object stands
+   on the ground at its lowest pixel in each column (Hoiem's "pop-up" rule), a
+   gap nearer than the background around it, and is rounded by the square root
+   of the distance from its outline (outline below the ground contact, middle
+   above), gap and rounding scaled by its confidence.
 6. **Edges.** Object outlines are snapped to the photo's colour edges at full
    resolution by a joint-bilateral majority vote (the bilateral median of a
-   binary mask), so depth edges stay sharp steps; the smooth background cues
+   binary mask) of the smoothed soft mask, so depth edges stay sharp steps
+   on the photo's edges, not on the small copy's pixel staircase; the smooth background cues
    go through a guided filter (``cv2.ximgproc.guidedFilter``).
 
 Nearness becomes depth with ``depth = 1 / (1/far_ratio + (1 - 1/far_ratio) n)``,
 so depth lies in [1, far_ratio] (default 6), kind "relative": always finite and
 positive, whatever the photo (constant, tiny, noisy, out-of-range values).
 
-Where it fails: it never knows absolute scale; photos looking steeply down (a
-table top from above reads as a receding floor -- often right) or up (a ceiling
-is not modelled); tilted horizons; several subjects at different depths (each
-stands at its lowest pixel, which is wrong for floating or cropped objects, and
-GrabCut may join a subject with similar-coloured things behind it, e.g. the
-motorcycle with the red crates on the shelf); subjects that fill the frame (a
-close-up cat: only the most salient part pops out, the rest follows the ground
-gradient); a low-texture subject touching the top edge (taken for sky);
-subjects coloured like the photo's border; night scenes (no haze cue). The
-contact sheet ``docs/depth_contact_sheet.png`` shows it on the bundled samples.
+Where it fails: it never knows absolute scale; photos looking up (a ceiling
+is not modelled); tilted horizons; several subjects at different depths;
+GrabCut joining a subject with similar-coloured things behind it (the
+motorcycle with the red crates on the shelf) or with the ground beside it (a
+sign on a plain lifted with a slab of the plain); a dark low-texture region
+reaching the top edge (a bridge's ceiling, a night sky over a dark city) taken
+for sky, with a step at its edge; subjects the confidence refuses (a lighthouse
+whose blob takes in the rocks across the frame, a ferris wheel spanning the
+bottom): they stay in the smooth background, flat but not torn. The sheet
+``docs/depth_prior_sheet.png`` shows it on real photos.
 """
 
 from __future__ import annotations
@@ -85,10 +92,17 @@ class PriorSettings:
     """Weight of the defocus cue."""
     foreground: bool = True
     """Find a salient foreground object with GrabCut and pop it out."""
-    foreground_pop: float = 0.2
+    foreground_pop: float = 0.1
     """Least nearness gap between a foreground object and the background around it."""
-    bulge: float = 0.08
-    """Extra nearness at the centre of a foreground object (rounded, not a flat card)."""
+    bulge: float = 0.12
+    """Rounding of a foreground object: its outline sits this much below its ground contact, its
+    middle this much above (by the square root of the distance from the outline)."""
+    min_confidence: float = 0.35
+    """Objects the prior is less sure of than this (see :func:`.foreground.object_confidence`) are
+    not lifted: they keep the smooth background depth."""
+    open_ramp: float = 0.1
+    """Nearness at the top edge of a photo with no sky (an aerial or downward view, a close-up, a
+    wall): its layout is one smooth ramp from this at the top to 1 at the bottom."""
     min_object_area: float = 0.01
     """Foreground objects smaller than this fraction of the photo are dropped."""
     min_edge_contrast: float = 8.0
@@ -115,6 +129,8 @@ class PriorSettings:
         check_range(self.defocus_weight, "defocus_weight", 0.0, 1.0)
         check_range(self.foreground_pop, "foreground_pop", 0.0, 1.0)
         check_range(self.bulge, "bulge", 0.0, 1.0)
+        check_range(self.min_confidence, "min_confidence", 0.0, 1.0)
+        check_range(self.open_ramp, "open_ramp", 0.0, 1.0)
         check_range(self.min_object_area, "min_object_area", 0.0, 1.0)
         check_range(self.min_edge_contrast, "min_edge_contrast", 0.0, 200.0)
         check_range(self.max_foreground_area, "max_foreground_area", 0.0, 1.0)
@@ -222,6 +238,12 @@ def _layout_nearness(h: int, w: int, horizon: float, backdrop: float) -> np.ndar
     return np.repeat(col[:, None], w, axis=1)
 
 
+def _ramp_nearness(h: int, w: int, top: float) -> np.ndarray:
+    """Nearness (h, w) growing linearly from ``top`` at the top edge to 1 at the bottom."""
+    y = (np.arange(h, dtype=np.float32) + 0.5) / h
+    return np.repeat((top + (1.0 - top) * y)[:, None], w, axis=1)
+
+
 def _guided(guide: np.ndarray, src: np.ndarray, radius: int, eps: float) -> np.ndarray:
     if radius < 1:
         return src
@@ -247,7 +269,11 @@ def estimate_prior(rgb: np.ndarray, settings: PriorSettings = PriorSettings()) -
     texture = _texture(grey)
     sky = sky_mask(small, texture)
     horizon = s.horizon if s.horizon is not None else estimate_horizon(sky, s.default_horizon)
-    layout = _layout_nearness(h, w, horizon, s.backdrop_nearness)  # (h, w)
+    open_view = s.horizon is None and sky.mean() < 0.05
+    if open_view:  # no sky, no horizon: one smooth ramp, no kink at an assumed horizon
+        layout = _ramp_nearness(h, w, s.open_ramp)
+    else:
+        layout = _layout_nearness(h, w, horizon, s.backdrop_nearness)  # (h, w)
     focus = focus_measure(grey, max(h, w) / 50)
 
     outdoor = float(np.clip(sky.mean() / 0.15, 0.0, 1.0))
@@ -279,7 +305,7 @@ def estimate_prior(rgb: np.ndarray, settings: PriorSettings = PriorSettings()) -
             lab = cv2.cvtColor(cv2.GaussianBlur(small, (0, 0), 1.5), cv2.COLOR_RGB2Lab)  # (h, w, 3)
             obj_values, kept = foreground_objects(
                 fg, background, layout, lab, min_area=s.min_object_area, min_edge_contrast=s.min_edge_contrast,
-                pop=s.foreground_pop, bulge=s.bulge,
+                pop=s.foreground_pop, bulge=s.bulge, saliency=sal, min_confidence=s.min_confidence,
             )
             fg_small = kept.astype(np.float32)
     # Full resolution: upsample, snap the object outlines to the photo's edges.
@@ -287,7 +313,9 @@ def estimate_prior(rgb: np.ndarray, settings: PriorSettings = PriorSettings()) -
     matte = np.zeros((H, W), bool)
     if fg_small.any():
         snap = max(2, round(1.5 * max(H, W) / max(gh, gw)))
-        matte = snap_mask_to_edges(resize_to(fg_small, (H, W)), photo, snap, s.edge_sigma_color)
+        # a smooth soft mask (no staircase from the small copies) for the snap to move onto the edges
+        soft = cv2.GaussianBlur(fg_small, (0, 0), 1.0)
+        matte = snap_mask_to_edges(resize_to(soft, (H, W)), photo, snap, s.edge_sigma_color)
         near_full = np.where(matte, resize_to(obj_values, (H, W)), near_full)
     peak = float(near_full.max())
     near_full = np.clip(near_full / max(peak, 1.0), 0.0, 1.0).astype(np.float32)
