@@ -203,11 +203,18 @@ def test_previews_are_colour_matched_to_the_full_frame(untrained):
     full = s.render_view(cam, full_hw, full_hw, preview=False, stylized=True).image.astype(np.float32)
     assert s.colour_gain is not None and s.colour_gain.shape == (3,)
     after = s.render_view(cam, prev_hw, full_hw, preview=True, stylized=True).image.astype(np.float32)
+    # the gain's contract, in the renderer's float colours: a preview times the gain has the full frame's mean
+    prev_f = s.render(cam, *prev_hw, preview=True, stylized=True).reshape(-1, 3)
+    full_f = s.render(cam, *full_hw, preview=False, stylized=True).reshape(-1, 3)
+    gained = np.clip(prev_f * s.colour_gain, 0.0, 1.0)
+    jump_f_before = np.abs(prev_f.mean(0) - full_f.mean(0)).mean()
+    jump_f_after = np.abs(gained.mean(0) - full_f.mean(0)).mean()
+    assert jump_f_after <= jump_f_before and jump_f_after < 1e-4, (jump_f_before, jump_f_after)
+    # what the window shows: the gained preview, within 8-bit rounding of the full frame (the untrained model's
+    # near-uniform frames already differ by hundredths of a level, so rounding, not colour, rules at that size)
     jump_before = np.abs(before.mean((0, 1)) - full.mean((0, 1))).mean()
     jump_after = np.abs(after.mean((0, 1)) - full.mean((0, 1))).mean()
-    # the gain never makes the jump worse, beyond a hundredth of a level (the untrained model's previews are
-    # already within ~0.01 levels of its full frame: rounding, not colour, at that size)
-    assert jump_after <= jump_before + 0.01 and jump_after < 1.0, (jump_before, jump_after)
+    assert jump_after < 0.5 and jump_before < 1.0, (jump_before, jump_after)
 
 
 def test_the_photos_clean_camera_range_bounds_the_orbit(plain):
