@@ -94,10 +94,30 @@ def _add_models(sub: "argparse._SubParsersAction") -> None:
     d.add_argument("model", choices=("depth-anything",),
                    help="depth-anything: Depth Anything V2 Small (Apache-2.0, about 99 MB; needs the depth extra: "
                         "pip install 'stylize3d[depth]')")
+    e = msub.add_parser("export-onnx", help="export a downloaded model to ONNX (for --depth onnx:FILE)",
+                        description="Export the downloaded Depth Anything to an ONNX file with a fixed input size, "
+                                    "checked against the network before it is written; run it with "
+                                    "--depth onnx:FILE:depth_anything (no Transformers needed then).")
+    e.add_argument("model", choices=("depth-anything",), help="the downloaded model to export")
+    e.add_argument("output", help="the .onnx file to write")
+    e.add_argument("--size", default="518x518", metavar="HxW",
+                   help="the graph's input, multiples of 14 (default 518x518; the photo is stretched to it)")
 
 
 def _models(args: argparse.Namespace) -> int:
     from stylize3d_core.depth import depth_anything
+
+    if args.models_command == "export-onnx":
+        try:
+            size = tuple(int(v) for v in args.size.lower().split("x"))
+        except ValueError:
+            size = ()
+        if len(size) != 2:
+            raise InputError("--size", f"expected HEIGHTxWIDTH such as 518x518, got {args.size!r}")
+        gap = depth_anything.export_onnx(args.output, size)
+        print(f"{PROG}: wrote {args.output} ({size[0]}x{size[1]} input; matches the network within {gap:.1e} of "
+              f"its range); use --depth onnx:{args.output}:depth_anything", file=sys.stderr)
+        return 0
 
     folder = depth_anything.cached_folder()
     if folder is not None:

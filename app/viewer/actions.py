@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any, Callable, Optional
 
 import open3d.visualization.gui as gui
 
+from stylize3d_core.depth import depth_anything
 from stylize3d_core.errors import InputError
 from stylize3d_core.export.camera_paths import read_camera_path
 from stylize3d_core.io.camera_path import CameraPath, save_camera_path
@@ -125,6 +126,7 @@ class PhotoController(Controller):
     def __init__(self, window: ViewerHost) -> None:
         super().__init__(window)
         self._strip: list = []
+        self._download: Optional[threading.Thread] = None  # the Depth Anything download, while it runs
 
     def build_strip(self) -> None:
         """Thumbnails of the bundled styles and the recently used ones (main thread, at start); the recent
@@ -282,8 +284,73 @@ class PhotoController(Controller):
         self.change_spec(f"Depth edges: {method or 'as estimated'}", refine_depth=method)
 
     def set_depth(self, source: str) -> None:
-        """Choose the depth source (a spec such as "prior" or a depth file) and rebuild the open photo with it."""
+        """Choose the depth source (a spec such as "prior" or a depth file) and rebuild the open photo with it.
+        Depth Anything without its weights is not chosen: the status line points at the Download button."""
+        if source == depth_anything.SPEC and depth_anything.cached_folder() is None:
+            self.show_depth_model()
+            self.show_depth_choice()
+            self.window.set_status("Depth Anything's weights are not downloaded: click "
+                                   f"\"{P.DOWNLOAD_LABEL}\" under Depth (once, needs the network)"
+                                   if depth_anything.installed() else
+                                   f"Depth Anything needs the depth extra: {depth_anything.EXTRA_HINT}")
+            return
         self.change_spec(f"Depth source: {source}", depth=source)
+
+    def show_depth_choice(self) -> None:
+        """Show the state's depth source in the picker (a depth file shows as the picker's first entry)."""
+        specs = [spec for spec, _ in P.DEPTH_CHOICES]
+        depth = self.window.state.spec.depth
+        self.window.panel.depth.selected_index = specs.index(depth) if depth in specs else 0
+
+    def show_depth_model(self, downloading: bool = False) -> None:
+        """The Download button: offered while the depth extra is installed and the weights are not cached."""
+        button = self.window.panel.depth_download
+        cached = depth_anything.cached_folder() is not None
+        button.text = ("Downloading Depth Anything ..." if downloading else
+                       "Depth Anything downloaded" if cached else P.DOWNLOAD_LABEL)
+        button.enabled = not downloading and not cached and depth_anything.installed()
+
+    def download_depth_model(self) -> None:
+        """Download Depth Anything's pinned weights on a thread of their own, the progress in the status line;
+        once they are in the cache, choose it as the depth source (the open photo is rebuilt with it)."""
+        w = self.window
+        if depth_anything.cached_folder() is not None:
+            self.show_depth_model()
+            self.set_depth(depth_anything.SPEC)
+            return
+        if self._download is not None and self._download.is_alive():
+            return
+        self.show_depth_model(downloading=True)
+        w.set_busy("Downloading Depth Anything V2 Small (about 99 MB) ...", 0.0)
+        shown = [-1]
+
+        def progress(fraction: float) -> None:  # on the download thread: post only whole-percent changes
+            percent = int(100 * fraction)
+            if percent != shown[0]:
+                shown[0] = percent
+                w.post(lambda: w.set_busy(f"Downloading Depth Anything V2 Small ... {percent} %", fraction))
+
+        def failed(name: str, e: BaseException) -> None:
+            self.show_depth_model()
+            self.task_failed(name, e)
+
+        def run() -> None:
+            try:
+                depth_anything.download(progress=progress)
+            except BaseException as e:  # noqa: BLE001 (InputError and anything else): a dialog, not a dead thread
+                w.post(lambda: failed("download Depth Anything", e))
+            else:
+                w.post(self._depth_model_downloaded)
+
+        # its own thread, not the compute worker's: the view keeps rendering through a long download
+        self._download = threading.Thread(target=run, name="download Depth Anything", daemon=True)
+        self._download.start()
+
+    def _depth_model_downloaded(self) -> None:
+        self.show_depth_model()
+        self.window.set_busy("Depth Anything downloaded: it is the depth source now", None)
+        self.set_depth(depth_anything.SPEC)
+        self.window.panel.depth.selected_index = [spec for spec, _ in P.DEPTH_CHOICES].index(depth_anything.SPEC)
 
     # -- widget callbacks --------------------------------------------------------------
     @ui_callback
@@ -307,6 +374,10 @@ class PhotoController(Controller):
     @ui_callback
     def on_open_depth(self) -> None:
         self.window.file_dialog(gui.FileDialog.OPEN, "Open depth or disparity file", DEPTH_FILTERS, self.set_depth)
+
+    @ui_callback
+    def on_download_depth_model(self) -> None:
+        self.download_depth_model()
 
     @ui_callback
     def on_refine_choice(self, text: str, index: int) -> None:

@@ -24,6 +24,7 @@ DEPTH_CHOICES: Tuple[Tuple[str, str], ...] = (
     ("depth-anything", "Depth Anything V2 (learned)"),
 )
 """Depth sources offered in the picker: (spec, label). A depth file is chosen with "Depth file..."."""
+DOWNLOAD_LABEL = "Download Depth Anything (99 MB)"
 
 REFINE_CHOICES: Tuple[Tuple[Optional[str], str], ...] = (
     (None, "depth edges as estimated"),
@@ -219,6 +220,10 @@ class Panel:
         depth = gui.CollapsableVert("Depth", 0.3 * em, gui.Margins(int(0.5 * em), 0, 0, 0))
         depth.add_child(self.depth)
         depth.add_child(self.depth_file)
+        self.depth_download = gui.Button(DOWNLOAD_LABEL)
+        self.depth_download.tooltip = ("download Depth Anything V2 Small's weights (Apache-2.0, about 99 MB) once "
+                                       "into the Hugging Face cache; needs the network")
+        depth.add_child(self.depth_download)
         self.refine = gui.Combobox()
         for _, label in REFINE_CHOICES:
             self.refine.add_item(label)

@@ -151,3 +151,65 @@ def test_keyframe_edits_are_pure_and_keep_durations_with_their_keyframe():
         KE.delete_keyframe(kp, 3)
     with pytest.raises(InputError):
         KE.set_keyframe_duration(kp, 0, 0.0)
+
+
+def _depth_panel(w: FakeWindow) -> None:
+    from stylize3d_app.viewer import panel as P
+
+    w.panel.depth = SimpleNamespace(selected_index=0)
+    w.panel.depth_download = SimpleNamespace(text=P.DOWNLOAD_LABEL, enabled=True)
+
+
+def test_depth_anything_is_offered_for_download_until_its_weights_are_cached(monkeypatch, tmp_path):
+    """Choosing Depth Anything without its weights points at the Download button; the button downloads on a
+    thread of its own (a stand-in for the hub writes the cache's layout), reports the bytes in the status
+    line, then makes it the depth source; a failed download keeps the button and shows the error."""
+    pytest.importorskip("transformers")
+    import huggingface_hub
+
+    from stylize3d_core.depth import depth_anything as da
+
+    monkeypatch.setenv("HF_HUB_CACHE", str(tmp_path / "cache"))
+    monkeypatch.delenv("HF_HUB_OFFLINE", raising=False)
+    monkeypatch.setattr(da, "_check_reachable", lambda endpoint: None)
+    w = FakeWindow(ViewState())
+    _depth_panel(w)
+    photos = PhotoController(w)
+    photos.show_depth_model()
+    assert w.panel.depth_download.enabled
+    photos.set_depth("depth-anything")
+    assert w.state.spec.depth != "depth-anything" and w.worker.tasks == []
+    assert "Download Depth Anything" in w.status[-1] and w.panel.depth.selected_index == 0
+
+    def offline(repo_id, **kw):
+        raise OSError("no route to host")
+
+    monkeypatch.setattr(huggingface_hub, "snapshot_download", offline)
+    photos.download_depth_model()
+    photos._download.join(10)
+    assert "no route to host" in w.errors[-1] and w.panel.depth_download.enabled
+
+    import threading
+
+    go = threading.Event()
+
+    def hub(repo_id, revision=None, cache_dir=None, tqdm_class=None, **kw):
+        go.wait(10)  # until the test has seen the button while the download runs
+        bar = tqdm_class(total=200, unit="B", disable=True)
+        folder = tmp_path / "cache" / ("models--" + repo_id.replace("/", "--")) / "snapshots" / revision
+        folder.mkdir(parents=True)
+        bar.update(100)
+        (folder / "config.json").write_text("{}")
+        bar.update(100)
+        return str(folder)
+
+    monkeypatch.setattr(huggingface_hub, "snapshot_download", hub)
+    photos.download_depth_model()
+    assert w.panel.depth_download.text.startswith("Downloading") and not w.panel.depth_download.enabled
+    photos.download_depth_model()  # a second click while it runs starts nothing
+    go.set()
+    photos._download.join(10)
+    assert any(s.endswith("... 50 %") for s in w.status) and any(s.endswith("... 100 %") for s in w.status)
+    assert w.state.spec.depth == "depth-anything" and da.cached_folder() is not None
+    assert w.panel.depth_download.text == "Depth Anything downloaded" and not w.panel.depth_download.enabled
+    assert w.panel.depth.selected_index == 4

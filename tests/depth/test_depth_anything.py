@@ -158,6 +158,7 @@ def test_download_uses_the_pinned_revision(monkeypatch, tmp_path, tiny, capsys):
 
     monkeypatch.delenv("HF_HUB_OFFLINE", raising=False)
     monkeypatch.setattr(huggingface_hub, "snapshot_download", stand_in)
+    monkeypatch.setattr(da, "_check_reachable", lambda endpoint: None)
     assert main(["models", "download", "depth-anything"]) == 0
     assert asked == {"repo_id": da.MODEL_ID, "revision": da.REVISION}
     assert len(da.REVISION) == 40 and da.REVISION != "main"
@@ -171,3 +172,85 @@ def test_info_reports_the_weights(monkeypatch, tmp_path):
     report = collect()["depth_anything"]
     assert report["weights_cached"] is False and "models download" in report["detail"]
     assert report["revision"] == da.REVISION
+
+
+def test_download_reports_the_bytes_it_receives(monkeypatch, tmp_path):
+    """``progress`` hears the fraction of the bytes of huggingface_hub's byte bar (a stand-in for the hub that
+    drives the tqdm class it is given the way snapshot_download does), and 1.0 at the end."""
+    import huggingface_hub
+
+    def stand_in(repo_id, revision=None, tqdm_class=None, **kw):
+        files = tqdm_class(total=3, unit="it", disable=True)  # the per-file counter: not reported
+        files.update(1)
+        bar = tqdm_class(total=0, unit="B", disable=True)  # the byte bar learns its total as files start
+        bar.total = 1000
+        for _ in range(4):
+            bar.update(250)
+        return str(tmp_path)
+
+    heard = []
+    monkeypatch.delenv("HF_HUB_OFFLINE", raising=False)
+    monkeypatch.setattr(huggingface_hub, "snapshot_download", stand_in)
+    monkeypatch.setattr(da, "_check_reachable", lambda endpoint: None)
+    assert da.download(progress=heard.append) == tmp_path
+    assert heard == [0.25, 0.5, 0.75, 1.0, 1.0]
+
+
+def test_an_unreachable_hub_fails_at_once_with_one_line(monkeypatch):
+    """A hub out of reach is refused before huggingface_hub's retries start."""
+    import socket
+
+    import huggingface_hub
+
+    with socket.socket() as s:  # a port nothing listens on: refused at once
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    monkeypatch.delenv("HF_HUB_OFFLINE", raising=False)
+    monkeypatch.setenv("HF_ENDPOINT", f"http://127.0.0.1:{port}")
+    monkeypatch.setattr(huggingface_hub, "snapshot_download", lambda *a, **k: pytest.fail("the hub was asked"))
+    with pytest.raises(InputError, match=r"cannot reach 127\.0\.0\.1 .*--depth prior"):
+        da.download()
+
+
+def _cache_with(tiny, root):
+    import shutil
+
+    snap = root / ("models--" + da.MODEL_ID.replace("/", "--")) / "snapshots" / da.REVISION
+    shutil.copytree(tiny, snap)
+    return snap
+
+
+def test_onnx_export_runs_as_the_onnx_source_and_matches_the_network(monkeypatch, tmp_path, tiny, capsys):
+    """``models export-onnx`` writes a fixed-size graph that the ``onnx:`` source reads its size from; on a
+    photo of the graph's aspect (both paths feed the network the same size) the depth equals the Transformers
+    path's but for the resize's interpolation."""
+    from stylize3d_core.depth.onnx_model import OnnxDepthModel, OnnxSettings, PRESETS
+
+    monkeypatch.setenv("HF_HUB_CACHE", str(tmp_path / "cache"))
+    _cache_with(tiny, tmp_path / "cache")
+    dest = tmp_path / "da.onnx"
+    assert main(["models", "export-onnx", "depth-anything", str(dest), "--size", "56x84"]) == 0
+    assert f"onnx:{dest}:depth_anything" in capsys.readouterr().err
+    yy, xx = np.mgrid[0:112, 0:168].astype(np.float32)
+    rgb = np.stack([xx / 168, yy / 112, 0.5 + 0.4 * np.sin(xx / 9.0) * np.cos(yy / 7.0)], -1).astype(np.float32)
+    onnx_depth = OnnxDepthModel(dest, OnnxSettings(preset=PRESETS["depth_anything"])).estimate(rgb).depth
+    torch_depth = da.DepthAnythingModel().estimate(rgb).depth
+    assert onnx_depth.shape == torch_depth.shape == (112, 168)
+    assert np.corrcoef(onnx_depth.ravel(), torch_depth.ravel())[0, 1] > 0.99
+    assert main(["render", str(tmp_path / "none.png"), "--depth", f"onnx:{dest}:depth_anything"]) == 2  # no photo
+
+
+@pytest.mark.parametrize("size", ["500x500", "518", "axb", "0x14"])
+def test_onnx_export_refuses_a_size_off_the_patch_grid(monkeypatch, tmp_path, tiny, capsys, size):
+    monkeypatch.setenv("HF_HUB_CACHE", str(tmp_path / "cache"))
+    _cache_with(tiny, tmp_path / "cache")
+    dest = tmp_path / "da.onnx"
+    assert main(["models", "export-onnx", "depth-anything", str(dest), "--size", size]) == 2
+    assert "size" in capsys.readouterr().err
+    assert not dest.exists() and list(tmp_path.glob("*.onnx*")) == []
+
+
+def test_onnx_export_without_weights_names_the_download(monkeypatch, tmp_path, capsys):
+    monkeypatch.setenv("HF_HUB_CACHE", str(tmp_path / "empty_cache"))
+    assert main(["models", "export-onnx", "depth-anything", str(tmp_path / "da.onnx")]) == 2
+    assert "models download depth-anything" in capsys.readouterr().err
