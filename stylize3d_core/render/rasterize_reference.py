@@ -19,7 +19,8 @@ import torch
 
 from ..checks import check_shape
 from ..errors import InputError
-from .rasterize import CORE_WEIGHT, MAX_SPLAT_SCALE, Fragments, RasterSettings
+from .raster_settings import Fragments, RasterSettings
+from .splat import CORE_WEIGHT, MAX_SPLAT_SCALE
 
 
 def rasterize_points_reference(
