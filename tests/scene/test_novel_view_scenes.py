@@ -88,7 +88,7 @@ TRUTH_SAMPLES = 8
 """Rays per pixel side of the ray-cast truth (the photo itself: 3): a truth's coverage of a silhouette's
 pixel is quantised to 1 / TRUTH_SAMPLES, and the disoccluded strips beside a moved silhouette are a few
 pixels wide, so a 3 x 3 truth moved the figures by 2-11 dB from denser ones (session 19,
-``benchmarks/bench_scene_truth.py``); 8 x 8 is within ~1/16 of the exact coverage."""
+``tests/benchmarks/bench_scene_truth.py``); 8 x 8 is within ~1/16 of the exact coverage."""
 
 FLOOR_DB = 30.0
 """Least PSNR on the disoccluded pixels (the issue's target), every scene and move: 30.4 dB and up since
