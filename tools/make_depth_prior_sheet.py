@@ -7,7 +7,7 @@
 For each photo of :data:`PHOTOS` (chosen for variety: portrait, close-up,
 indoor table top, street, vehicles in front, landscape slopes, aerial views,
 a bridge, night scenes), three tiles stacked: the photo, the prior at git
-revision ``--before`` (``benchmarks/prior_before.py``) and this checkout's
+revision ``--before`` (``tests/benchmarks/prior_before.py``) and this checkout's
 prior. Depth is shown as in ``docs/depth_contact_sheet.png``: inverse depth
 through turbo, 1st..99th percentile, red = near, blue = far. The photos are
 training data and are not copied into the repository: only the sheet is.
@@ -33,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _load(path: Path):
-    """A script's module by its file (benchmarks/ is no package)."""
+    """A script's module by its file (tests/benchmarks/ is no package)."""
     spec = importlib.util.spec_from_file_location(path.stem, path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
@@ -42,7 +42,7 @@ def _load(path: Path):
 
 from make_contact_sheet import colour_depth, label  # noqa: E402  (tools/, the script's folder, is on sys.path)
 
-_before = _load(ROOT / "benchmarks" / "prior_before.py")
+_before = _load(ROOT / "tests" / "benchmarks" / "prior_before.py")
 BEFORE_REV, load_prior_at = _before.BEFORE_REV, _before.load_prior_at
 from stylize3d_core.depth import prior as prior_after  # noqa: E402
 from stylize3d_core.io.atomic import atomic_path  # noqa: E402

@@ -1,7 +1,7 @@
 """What a person sees: style distance, sharpness and consistency of stylized frames, against baselines.
 
 The measurement the model is steered by (``stylize3d bench quality``,
-``benchmarks/bench_quality.py``; docs/quality.md explains it). For every pair of
+``tests/benchmarks/bench_quality.py``; docs/quality.md explains it). For every pair of
 a content photo and a style image, the same cameras (the first ``frames``
 cameras of the default 90-frame circle trajectory) are rendered by four methods:
 

@@ -1,6 +1,6 @@
 """Timing helpers for the benchmarks: repeated runs after warm-up calls, their median and minimum, peak memory.
 
-The benchmark scripts in ``benchmarks/`` time a callable several times and
+The benchmark scripts in ``tests/benchmarks/`` time a callable several times and
 report the median (robust to a burst of load on a shared machine) and the
 minimum (the least disturbed run). Everything here is in seconds; a script
 that prints milliseconds scales the result itself.

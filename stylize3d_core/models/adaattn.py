@@ -228,7 +228,7 @@ class AdaAttNConfig:
     def lite(cls) -> "AdaAttNConfig":
         """About 2.5x fewer FLOPs for CPU re-styling: 128-unit MLPs and value, 64-channel query/key.
 
-        See ``benchmarks/bench_decoder.py`` for timings at M = 20k and 60k points.
+        See ``tests/benchmarks/bench_decoder.py`` for timings at M = 20k and 60k points.
         """
         return cls(hidden=128, value_channels=128, qk_channels=64)
 

@@ -56,7 +56,7 @@ average) and takes the mean mask as the coverage channel, then decodes at
 (H, W). The supersampled size must be even.
 
 **Speed.** :meth:`DecoderConfig.lite` meets the CPU targets (512^2 frame
-<= 0.5 s, 256^2 preview <= 0.1 s on 2 cores; ``benchmarks/bench_decoder.py``).
+<= 0.5 s, 256^2 preview <= 0.1 s on 2 cores; ``tests/benchmarks/bench_decoder.py``).
 Run it under ``torch.inference_mode()``; with ``channels_last`` (default) the
 weights and activations use NHWC, which oneDNN convolves fastest on CPU.
 ``forward(..., bfloat16=True)`` (inference) runs the U-Net's convolutions under a bfloat16

@@ -301,7 +301,7 @@ def onnx_threads(n: Optional[int]) -> Iterator[None]:
 AUTO_PIXELS_PER_THREAD = 120_000
 """``decoder_runtime="auto"`` runs ONNX Runtime for frames of at least this many (padded) pixels per thread
 (:func:`prefers_onnx`), torch below: ONNX Runtime's lead grows with the frame, torch (oneDNN) is faster on
-small ones. ``benchmarks/bench_decoder_runtime.py``, version 7's U-Net (width 96) on this AVX2 machine (torch /
+small ones. ``tests/benchmarks/bench_decoder_runtime.py``, version 7's U-Net (width 96) on this AVX2 machine (torch /
 ONNX Runtime ms): one thread 264x180 88 / 95, 528x360 442 / 366, 784x528 1116 / 840; two threads 528x360 192 /
 206, 784x528 605 / 452. Version 8's (width 64): one thread 264x180 47 / 48, 784x528 530 / 449; two threads
 264x180 25 / 32, 784x528 320 / 283."""

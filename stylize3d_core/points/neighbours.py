@@ -10,7 +10,7 @@ each query, nearest first, keeping those within the radius. That is what the
 encoder wants (the closest points of a neighbourhood, never an arbitrary subset
 of a crowded ball), and it costs one k-NN search plus a mask.
 
-Why not the alternatives (``benchmarks/bench_points.py``, photo-like NDC clouds,
+Why not the alternatives (``tests/benchmarks/bench_points.py``, photo-like NDC clouds,
 the encoder's stem search, k=16, r=0.015, all N points among all N, on the
 project's busy 2-core CPU): k-NN + mask takes 0.25 / 0.5-1.0 / 1.5-3.6 s at
 75k / 300k / 1M points. Open3D's ``hybrid_search`` (its own radius-bounded
@@ -120,7 +120,7 @@ class GridKNN:
     the k-th found, so the answer is exact (the k nearest, nearest first; among equidistant points the
     first one found). Squared distances are float32, summed as ``dx*dx + dy*dy + dz*dz``.
 
-    It is faster than Open3D's k-d tree for these queries (``benchmarks/bench_points.py`` compares the
+    It is faster than Open3D's k-d tree for these queries (``tests/benchmarks/bench_points.py`` compares the
     two), most of all for the 3-NN of many points among few: queries run on the pool's threads without
     the GIL, where Open3D's search holds it.
 

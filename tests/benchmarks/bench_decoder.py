@@ -1,6 +1,6 @@
 """Timings of the style side and the decoder on this CPU (prints figures; asserts nothing).
 
-    .venv/bin/python benchmarks/bench_decoder.py [--repeats 9] [--widths 64 96 128 192] [--paper-512]
+    .venv/bin/python tests/benchmarks/bench_decoder.py [--repeats 9] [--widths 64 96 128 192] [--paper-512]
 
 Reports the median (and the minimum, the least disturbed run on a shared
 machine) over ``--repeats`` runs, after one warm-up, under

@@ -15,7 +15,7 @@ leaving the first / last convolutions in float32; per variant, the PSNR of whole
 the four sample photos (cameras not used in the calibration) against the float32 frames, and the time.
 (Rejected as a default: see the figures it prints; ``docs/performance.md``.)
 
-    .venv/bin/python benchmarks/bench_decoder_runtime.py [--repeats 7] [--stylized] [--int8] [--no-unet]
+    .venv/bin/python tests/benchmarks/bench_decoder_runtime.py [--repeats 7] [--stylized] [--int8] [--no-unet]
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 from stylize3d_core.models.checkpoint import load_checkpoint  # noqa: E402
 from stylize3d_core.models.decoder_onnx import OnnxUNet, onnx_unet  # noqa: E402

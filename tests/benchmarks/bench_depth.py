@@ -1,6 +1,6 @@
 """Depth sources on this CPU (prints figures; asserts nothing).
 
-    .venv/bin/python benchmarks/bench_depth.py [--repeats 5]
+    .venv/bin/python tests/benchmarks/bench_depth.py [--repeats 5]
 
 Reports the median (and minimum, the least disturbed run on a shared machine)
 over ``--repeats`` runs after one warm-up:

@@ -1,7 +1,7 @@
 """Depth Anything V2 Small's time on this CPU: the real architecture (random weights: no download needed) at the
 image processor's 518 px, with pre- and post-processing (``DepthAnythingModel.estimate``), for a 1 MP photo.
 
-    .venv/bin/python benchmarks/bench_depth_anything.py [--threads 2] [--repeats 5]
+    .venv/bin/python tests/benchmarks/bench_depth_anything.py [--threads 2] [--repeats 5]
 
 Prints the median and minimum seconds of ``--repeats`` runs after one warm-up, and the network's input size.
 """

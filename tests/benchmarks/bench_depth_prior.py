@@ -1,6 +1,6 @@
 """The built-in depth prior: ordinal agreement with stereo ground truth and time at 1 MP, before and after.
 
-    .venv/bin/python benchmarks/bench_depth_prior.py [--repeats 5] [--before REV] [--threads 2]
+    .venv/bin/python tests/benchmarks/bench_depth_prior.py [--repeats 5] [--before REV] [--threads 2]
 
 * Ordinal agreement (``stylize3d_core.eval.ordinal``) on scikit-image's
   motorcycle pair: the share of 200 000 random pixel pairs with ground-truth
@@ -11,7 +11,7 @@
   ``--threads`` threads.
 
 "before" is the prior at git revision ``--before`` (default: the revision the
-rework started from, see ``benchmarks/prior_before.py``); "after" is this
+rework started from, see ``tests/benchmarks/prior_before.py``); "after" is this
 checkout's. Prints figures; asserts nothing.
 """
 

@@ -2,7 +2,7 @@
 
 Frames are made beforehand (a smooth, photo-like colour field with fine texture,
 panning a little every frame, like a slow camera move), so only encoding and
-writing are timed. Run: ``python benchmarks/bench_export.py [--frames 90] [--size 512]``.
+writing are timed. Run: ``python tests/benchmarks/bench_export.py [--frames 90] [--size 512]``.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Benchmark: the hidden layer's colour on real textures, against the truth behind pasted cards.
 
 Flat-coloured cards are pasted, apart from each other, in front of each test photo
-(``benchmarks/photos.py``: the bundled samples and three scikit-image photos) on a
+(``tests/benchmarks/photos.py``: the bundled samples and three scikit-image photos) on a
 receding plane of depth; what the cards hide is the photo itself, so the LDI's hidden
 layer behind them can be scored against it. Prints the PSNR of
 the hidden colour against the photo, on the hidden pixels within ``--near`` pixels of a

@@ -19,7 +19,7 @@ range's full forward dolly (magnification: the screen-door test). Holes are the 
 landed), i.e. what hole filling would have to invent. Timings are rough on a
 shared CPU.
 
-Run from the repository root: ``.venv/bin/python benchmarks/bench_holes.py [--size 512] [--range photo]``
+Run from the repository root: ``.venv/bin/python tests/benchmarks/bench_holes.py [--size 512] [--range photo]``
 """
 
 from __future__ import annotations

@@ -12,7 +12,7 @@ depth) and a held-out pose (``stylize3d_core/eval/multiview.py``). Prints
     view stylized on its own (its own 3D photo, rendered at the four poses);
     the shipped lite model and a shipped style.
 
-    .venv/bin/python benchmarks/bench_multiview.py [--seeds 3 5 7] [--model M] [--style S]
+    .venv/bin/python tests/benchmarks/bench_multiview.py [--seeds 3 5 7] [--model M] [--style S]
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ from stylize3d_core.scene.multiview import merge_views, pose_in_view
 from stylize3d_core.scene.photo3d import Photo3D, Photo3DSettings
 from stylize3d_core.stylize import Stylized3DPhoto, StylizeSettings
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def main() -> None:

@@ -3,7 +3,7 @@
 Runs each configuration in a fresh subprocess so the peak resident memory
 (ru_maxrss) belongs to that run alone. Prints a table; asserts nothing.
 
-    .venv/bin/python benchmarks/bench_pipeline.py [--photo assets/samples/astronaut.jpg]
+    .venv/bin/python tests/benchmarks/bench_pipeline.py [--photo assets/samples/astronaut.jpg]
 
 ``--first-frame`` times instead what ``stylize3d bench targets`` calls the first frame (photo file + style
 image -> the first stylized 512-pixel frame of a photo resized to ``--megapixels``, model and style CNN
@@ -12,7 +12,7 @@ checkout, e.g. ``git worktree add /tmp/before <commit>``, whose ``stylize3d_core
 takes the model argument: copy this one's) the two checkouts alternate, run for run, and the table
 adds the before / after ratio of the medians, so a burst of load on a shared machine hits both.
 
-    .venv/bin/python benchmarks/bench_pipeline.py --first-frame --repeats 3 --baseline /tmp/before
+    .venv/bin/python tests/benchmarks/bench_pipeline.py --first-frame --repeats 3 --baseline /tmp/before
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 CHILD = r"""
 import json, sys, time

@@ -6,7 +6,7 @@ noise. This script times only the reference (every point) and the point budgets 
 targets' case (the sample at 1 MP, 512-pixel frames, 3 cameras), ``--rounds`` interleaved rounds, and
 prints the median ms per frame, the ratio of each round's times (its median and range) and the PSNR.
 
-    .venv/bin/python benchmarks/bench_point_budget.py [--rounds 8] [--budgets 6,3]
+    .venv/bin/python tests/benchmarks/bench_point_budget.py [--rounds 8] [--budgets 6,3]
 """
 
 from __future__ import annotations

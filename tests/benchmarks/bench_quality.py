@@ -7,7 +7,7 @@ per-frame 2D network and stylize-then-bake on the same cameras. Writes
 ``quality.md``, ``quality.json`` and the contact sheets to ``--out``
 (docs/quality.md explains every figure).
 
-    .venv/bin/python benchmarks/bench_quality.py [--quick] --out DIR [--model CKPT]
+    .venv/bin/python tests/benchmarks/bench_quality.py [--quick] --out DIR [--model CKPT]
                                                  [--eval-data runs/data/eval] [--strength 1] [--threads 2]
                                                  [--photos chelsea,stereo_motorcycle] [--styles NAME,...]
 
@@ -22,7 +22,7 @@ from pathlib import Path
 
 import torch
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 from stylize3d_core.bench.quality import run_quality  # noqa: E402
 from stylize3d_core.bench.report import markdown_table  # noqa: E402

@@ -1,6 +1,6 @@
 """Benchmark of the point rasterizer (stylize3d_core.render.rasterize).
 
-Run from the repository root:  .venv/bin/python benchmarks/bench_rasterizer.py [--quick]
+Run from the repository root:  .venv/bin/python tests/benchmarks/bench_rasterizer.py [--quick]
 
 Prints the median and the minimum over several runs, in ms, at three sizes with
 the same density (75k x 64 -> 256^2, 300k x 64 -> 512^2, 1.2M x 64 -> 1024^2), under

@@ -6,7 +6,7 @@ strips beside a moved silhouette (a few pixels wide) that quantisation is a larg
 This prints the same figures with the photo at ``--photo-samples`` and the truth at each of
 ``--truth-samples`` rays per pixel side (8 x 8 is within ~1/16 of the exact coverage).
 
-    .venv/bin/python benchmarks/bench_scene_truth.py [--photo-samples 3] [--truth-samples 3 6 8]
+    .venv/bin/python tests/benchmarks/bench_scene_truth.py [--photo-samples 3] [--truth-samples 3 6 8]
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _load_test_module(path: Path):

@@ -8,7 +8,7 @@ defaults) at ``--preview`` px square. Prints the median per round and over all r
 PSNR against the full-quality float32 frame of the same camera and size (the preview target's measure).
 Targets (issue 11): 512x512 <= 0.5 s, 256x256 <= 60 ms, on this machine's 2 cores.
 
-    .venv/bin/python benchmarks/bench_square.py [--threads 2] [--rounds 3] [--model M]
+    .venv/bin/python tests/benchmarks/bench_square.py [--threads 2] [--rounds 3] [--model M]
         [--preview-points-per-pixel P] [--preview-border-margin M]
 
 Pause any background training while it runs (``kill -STOP``): the figures are wall times.
@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def main() -> None:

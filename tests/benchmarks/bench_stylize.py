@@ -27,7 +27,7 @@ figures are noisy. Without a trained checkpoint (``--model`` or
 ``assets/model/stylize3d_lite.safetensors``) an UNTRAINED lite model is used:
 its timings are valid, its consistency and style figures are not meaningful.
 
-    .venv/bin/python benchmarks/bench_stylize.py [--model M] [--photo P] [--style S] [--repeats 3]
+    .venv/bin/python tests/benchmarks/bench_stylize.py [--model M] [--photo P] [--style S] [--repeats 3]
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_MODEL = ROOT / "assets/model/stylize3d_lite.safetensors"
 
 CHILD = r"""

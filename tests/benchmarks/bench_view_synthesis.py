@@ -12,7 +12,7 @@ on ``ldi`` samples they are pseudo views rendered from the photo's own LDI
 (at the data's target supersampling, so the plain render is close to them by
 construction: that column measures the renderer, not the world).
 
-    .venv/bin/python benchmarks/bench_view_synthesis.py CKPT [CKPT ...] [--data runs/data/eval] [--samples N]
+    .venv/bin/python tests/benchmarks/bench_view_synthesis.py CKPT [CKPT ...] [--data runs/data/eval] [--samples N]
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from pathlib import Path
 
 import torch
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 from stylize3d_core.eval.quality import plain_view_scores  # noqa: E402
 from stylize3d_core.eval.view_synthesis import KindScores, evaluate_view_synthesis  # noqa: E402

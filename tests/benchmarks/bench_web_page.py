@@ -5,7 +5,7 @@ Each page opens in a fresh browser, as a receiver opens it. The orbit rate is th
 one-second sweeps taken after the page has rested for two seconds (for about a second after the first frame
 the browser is still settling the page's decoded data and runs slower).
 
-    python benchmarks/bench_web_page.py [--out DIR] [--style STYLE]
+    python tests/benchmarks/bench_web_page.py [--out DIR] [--style STYLE]
 """
 
 from __future__ import annotations

@@ -3,9 +3,9 @@
 Three steps (the "before" frames come from another checkout's library, e.g. the
 main branch before the change, put first on ``PYTHONPATH``)::
 
-    .venv/bin/python benchmarks/clean_sheet.py render --out /tmp/after.npz
-    PYTHONPATH=/path/to/main .venv/bin/python benchmarks/clean_sheet.py render --poses /tmp/after.npz --out /tmp/before.npz
-    .venv/bin/python benchmarks/clean_sheet.py compose /tmp/before.npz /tmp/after.npz --out docs/clean_contact_sheet.png
+    .venv/bin/python tests/benchmarks/clean_sheet.py render --out /tmp/after.npz
+    PYTHONPATH=/path/to/main .venv/bin/python tests/benchmarks/clean_sheet.py render --poses /tmp/after.npz --out /tmp/before.npz
+    .venv/bin/python tests/benchmarks/clean_sheet.py compose /tmp/before.npz /tmp/after.npz --out docs/clean_contact_sheet.png
 
 ``render`` builds each test photo's 3D photo (built-in depth prior) with the
 library it imports and renders, with the plain renderer at the photo's size,
@@ -19,10 +19,10 @@ point covered, shown magenta on the sheet's lower half of each tile pair).
 Details a 256-px tile cannot show (a silhouette's sub-pixel position, a faint grid on a magnified
 surface) need the photo's own size and a magnified crop::
 
-    .venv/bin/python benchmarks/clean_sheet.py render --size 640 --photos coffee,astronaut --out /tmp/after.npz
-    PYTHONPATH=/path/to/main .venv/bin/python benchmarks/clean_sheet.py render --size 640 \
+    .venv/bin/python tests/benchmarks/clean_sheet.py render --size 640 --photos coffee,astronaut --out /tmp/after.npz
+    PYTHONPATH=/path/to/main .venv/bin/python tests/benchmarks/clean_sheet.py render --size 640 \
         --photos coffee,astronaut --poses /tmp/after.npz --out /tmp/before.npz
-    .venv/bin/python benchmarks/clean_sheet.py zoom /tmp/before.npz /tmp/after.npz \
+    .venv/bin/python tests/benchmarks/clean_sheet.py zoom /tmp/before.npz /tmp/after.npz \
         --crop coffee:0:40,300,100 --crop astronaut:1:60,330,100 --out docs/clean_zoom.png
 
 ``zoom`` lays out, per ``--crop photo:column:y,x,size``, the before and after frames' square crop
@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SHEET_PHOTOS = ("astronaut", "rocket", "chelsea", "stereo_motorcycle")
 COLUMNS = ("ken-burns corner", "full forward dolly", "photo range corner")
 TILE = 256

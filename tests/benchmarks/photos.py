@@ -12,7 +12,7 @@ from typing import Iterator, Tuple
 import cv2
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 SKIMAGE_PHOTOS = ("stereo_motorcycle", "camera", "coins")
 """Real photos shipped with scikit-image (not in the repository's samples)."""

@@ -15,7 +15,7 @@ import sys
 import types
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 BEFORE_REV = "facfcea"
 """The revision of the prior before issue 36's rework (the branch point of ``depth-prior``)."""
