@@ -40,8 +40,8 @@ MAX_SIZE = 96
 
 
 def _gui_helpers():
-    """tests/app/test_viewer_gui.py's Xvfb fixture and viewer runner (the tests import in importlib mode)."""
-    spec = importlib.util.spec_from_file_location("viewer_gui_helpers", Path(__file__).with_name("test_viewer_gui.py"))
+    """tests/app/viewer_gui_helpers.py's Xvfb fixture and viewer runner (the tests import in importlib mode)."""
+    spec = importlib.util.spec_from_file_location("viewer_gui_helpers", Path(__file__).with_name("viewer_gui_helpers.py"))
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module

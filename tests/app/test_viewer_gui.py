@@ -1,101 +1,47 @@
-"""The viewer window under Xvfb, driven through its test hooks (``--test-script``).
+"""The viewer window under Xvfb, driven through its test hooks (``--test-script``): scripted sessions.
 
-Each test starts its own Xvfb (a free display number chosen by Xvfb itself with
-``-displayfd``), runs the viewer in a ``spawn`` subprocess with a timeout, and
-checks the report, the screenshots and the files the script produced. Without
-Xvfb the tests are skipped with the reason. One test also drags with the real
-(XTest) mouse when libXtst is available.
+Opening, orbiting and exporting (and surviving bad files), closing during an export,
+the stylized view, the keyframe editor, the style strip and its mix, typed paths in
+the file dialogs and the recent files kept between runs. The real (XTest) mouse,
+key and wheel events are in ``test_viewer_gui_events.py``.
+
+Each test module starts its own Xvfb (a free display number chosen by Xvfb itself
+with ``-displayfd``); each test runs the viewer in a ``spawn`` subprocess with a
+timeout (``viewer_gui_helpers.py``), and checks the report, the screenshots and the
+files the script produced. Without Xvfb the tests are skipped with the reason.
 """
 
 from __future__ import annotations
 
-import ctypes
+import importlib.util
 import json
-import multiprocessing
 import shutil
-import time
 from pathlib import Path
-from typing import Any, Dict, Iterator, List, Optional, Tuple
+from typing import Tuple
 
 import numpy as np
 import pytest
 from PIL import Image
 
-from stylize3d_app.viewer import run_viewer_process
-from stylize3d_app.viewer.xserver import start_xvfb, xtest_click, xtest_libs
+from stylize3d_app.viewer.xserver import xtest_click
 
 pytestmark = [pytest.mark.gui, pytest.mark.slow]  # each test starts Open3D in a subprocess: 8-30 s
 
-REPO = Path(__file__).resolve().parents[2]
-OTHER_STYLE = REPO / "assets" / "styles" / "painting_style13_rocket.jpg"
-SCREEN = (1280, 800)
-RUN_TIMEOUT_S = 300
+
+def _gui_helpers():
+    """tests/app/viewer_gui_helpers.py (the tests import in importlib mode: loaded by its path)."""
+    spec = importlib.util.spec_from_file_location("viewer_gui_helpers", Path(__file__).with_name("viewer_gui_helpers.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
-@pytest.fixture(scope="module")
-def display() -> Iterator[str]:
-    """An X display served by a private Xvfb for this module."""
-    if shutil.which("Xvfb") is None:
-        pytest.skip("Xvfb is not installed: the viewer window tests need an X server (apt-get install xvfb)")
-    server = start_xvfb(SCREEN)
-    if server is None:
-        pytest.skip("Xvfb did not start (no display number reported): no X server for the window tests")
-    proc, name = server
-    try:
-        yield name
-    finally:
-        proc.terminate()
-        proc.wait(timeout=10)
-
-
-def run_viewer(display: str, tmp: Path, steps: List[Dict[str, Any]], args: List[str],
-               during=None) -> Tuple[int, Dict[str, Any]]:
-    """Run the viewer with ``steps`` in a spawn subprocess; ``during(report_path)`` runs meanwhile."""
-    script, report = tmp / "steps.json", tmp / "report.json"
-    script.write_text(json.dumps(steps))
-    argv = args + ["--size", f"{SCREEN[0]}x{SCREEN[1]}", "--test-script", str(script), "--test-report", str(report)]
-    proc = multiprocessing.get_context("spawn").Process(target=run_viewer_process, args=(argv, display))
-    proc.start()
-    try:
-        if during is not None:
-            during(report)
-        proc.join(RUN_TIMEOUT_S)
-        if proc.is_alive():
-            pytest.fail(f"the viewer did not finish within {RUN_TIMEOUT_S} s; report so far: {read_report(report)}")
-    finally:
-        if proc.is_alive():
-            proc.kill()
-            proc.join(10)
-    return proc.exitcode, read_report(report)
-
-
-def read_report(path: Path) -> Dict[str, Any]:
-    return json.loads(path.read_text()) if path.exists() else {}
-
-
-def wait_for_step(report_path: Path, op: str, count: int = 1, timeout: float = 120.0) -> Dict[str, Any]:
-    """The report once the viewer has run ``count`` steps ``op`` (polled while the test interacts)."""
-    t_end = time.monotonic() + timeout
-    while time.monotonic() < t_end:
-        rep = read_report(report_path)
-        if sum(s["op"] == op for s in rep.get("steps", [])) >= count:
-            return rep
-        time.sleep(0.05)
-    raise AssertionError(f"the viewer never reached the {op!r} step")
-
-
-def check_ran(code: Optional[int], report: Dict[str, Any]) -> None:
-    failed = [s for s in report.get("steps", []) if not s.get("ok")]
-    assert code == 0, f"viewer exit code {code} (negative = crashed); failed steps: {failed}"
-    assert report.get("ok") and not failed, failed
-
-
-def pixels(path: Path) -> np.ndarray:
-    return np.asarray(Image.open(path).convert("RGB")).astype(np.float32)
-
-
-def step(report: Dict[str, Any], op: str, index: int = 0) -> Dict[str, Any]:
-    return [s for s in report["steps"] if s["op"] == op][index]
+_GUI = _gui_helpers()
+display = _GUI.display  # the module's private Xvfb (a fixture)
+REPO, OTHER_STYLE = _GUI.REPO, _GUI.OTHER_STYLE
+run_viewer, check_ran, wait_for_step, pixels, step = (_GUI.run_viewer, _GUI.check_ran, _GUI.wait_for_step,
+                                                      _GUI.pixels, _GUI.step)
+_xtest = _GUI.xtest
 
 
 def test_open_orbit_export_and_survive_bad_files(display, tmp_path):
@@ -251,189 +197,6 @@ def test_stylized_view_strength_style_export_and_no_freeze(display, tmp_path, un
     assert state["spec"]["refine_depth"] == "bilateral_median" and state["spec"]["photo"].endswith("coffee.jpg")
 
 
-def _xtest():
-    """(libX11, libXtst) through ctypes, or None where they are missing."""
-    return xtest_libs()
-
-
-def test_real_mouse_drag_and_key_press(display, tmp_path):
-    libs = _xtest()
-    if libs is None:
-        pytest.skip("libXtst is not installed: cannot send real mouse and key events to Xvfb")
-    lx, lt = libs
-    steps = [
-        {"op": "load_sample"},
-        {"op": "wait_idle", "timeout": 120},
-        {"op": "screenshot", "path": str(tmp_path / "before.png")},
-        {"op": "grab_window", "path": str(tmp_path / "window.png")},
-        {"op": "sleep", "seconds": 4.0},  # the test drags the mouse now
-        {"op": "wait_idle"},
-        {"op": "screenshot", "path": str(tmp_path / "after.png")},
-        {"op": "state"},
-        {"op": "sleep", "seconds": 2.0},  # the test presses R (reset view) now
-        {"op": "wait_idle"},
-        {"op": "state"},
-        {"op": "quit"},
-    ]
-
-    def wait_for(report_path: Path, op: str, count: int = 1) -> Dict[str, Any]:
-        return wait_for_step(report_path, op, count)
-
-    def interact(report_path: Path) -> None:
-        rep = wait_for(report_path, "grab_window")
-        x0, y0, x1, y1 = step(rep, "grab_window")["result"]["box"]
-        x, y = x0 + (x1 - x0) // 3, (y0 + y1) // 2  # inside the view, left of the side panel
-        dpy = lx.XOpenDisplay(display.encode())
-        assert dpy, f"cannot open display {display}"
-        try:
-            lt.XTestFakeMotionEvent(dpy, -1, x, y, 0)
-            lt.XTestFakeButtonEvent(dpy, 1, 1, 0)
-            lx.XFlush(dpy)
-            for i in range(1, 21):
-                time.sleep(0.03)
-                lt.XTestFakeMotionEvent(dpy, -1, x + 5 * i, y, 0)
-                lx.XFlush(dpy)
-            lt.XTestFakeButtonEvent(dpy, 1, 0, 0)
-            lx.XFlush(dpy)
-            wait_for(report_path, "state")
-            keycode = lx.XKeysymToKeycode(dpy, lx.XStringToKeysym(b"r"))
-            lt.XTestFakeKeyEvent(dpy, keycode, 1, 0)
-            lt.XTestFakeKeyEvent(dpy, keycode, 0, 0)
-            lx.XFlush(dpy)
-        finally:
-            lx.XCloseDisplay(dpy)
-
-    code, report = run_viewer(display, tmp_path, steps, ["--no-model"], during=interact)
-    check_ran(code, report)
-    state = step(report, "state", 0)["result"]
-    yaw, limits = state["pose"]["yaw_deg"], state["limits"]
-    # 100 px of drag turn half the photo's yaw range (200 px reach the limit, whatever the range)
-    assert yaw == pytest.approx(100 * limits["deg_per_pixel"], rel=0.3), f"the mouse drag did not orbit (yaw {yaw})"
-    assert 0.3 * limits["max_yaw_deg"] < yaw < limits["max_yaw_deg"], "the drag was clamped: speeds not relative to the range"
-    assert report["stats"]["drag_clamped"] == [], "mouse moves of a 100 px drag met the range's limit"
-    assert np.abs(pixels(tmp_path / "after.png") - pixels(tmp_path / "before.png")).mean() > 5
-    assert step(report, "state", 1)["result"]["pose"]["yaw_deg"] == 0.0, "the R key did not reset the view"
-
-
-def _send_close_request(lx, dpy, title: bytes) -> bool:
-    """Send WM_DELETE_WINDOW to the top-level window named ``title`` (what a window manager's close
-    button does); False if no such window."""
-    lx.XDefaultRootWindow.restype = ctypes.c_ulong
-    lx.XDefaultRootWindow.argtypes = [ctypes.c_void_p]
-    lx.XQueryTree.argtypes = [ctypes.c_void_p, ctypes.c_ulong, ctypes.POINTER(ctypes.c_ulong),
-                              ctypes.POINTER(ctypes.c_ulong), ctypes.POINTER(ctypes.POINTER(ctypes.c_ulong)),
-                              ctypes.POINTER(ctypes.c_uint)]
-    lx.XFetchName.argtypes = [ctypes.c_void_p, ctypes.c_ulong, ctypes.POINTER(ctypes.c_char_p)]
-    lx.XInternAtom.restype = ctypes.c_ulong
-    lx.XInternAtom.argtypes = [ctypes.c_void_p, ctypes.c_char_p, ctypes.c_int]
-    lx.XSendEvent.argtypes = [ctypes.c_void_p, ctypes.c_ulong, ctypes.c_int, ctypes.c_long, ctypes.c_void_p]
-
-    class ClientMessage(ctypes.Structure):
-        _fields_ = [("type", ctypes.c_int), ("serial", ctypes.c_ulong), ("send_event", ctypes.c_int),
-                    ("display", ctypes.c_void_p), ("window", ctypes.c_ulong), ("message_type", ctypes.c_ulong),
-                    ("format", ctypes.c_int), ("data", ctypes.c_long * 5), ("pad", ctypes.c_long * 16)]
-
-    root = lx.XDefaultRootWindow(dpy)
-    r, p, n = ctypes.c_ulong(), ctypes.c_ulong(), ctypes.c_uint()
-    children = ctypes.POINTER(ctypes.c_ulong)()
-    lx.XQueryTree(dpy, root, ctypes.byref(r), ctypes.byref(p), ctypes.byref(children), ctypes.byref(n))
-    for i in range(n.value):
-        name = ctypes.c_char_p()
-        if lx.XFetchName(dpy, children[i], ctypes.byref(name)) and name.value == title:
-            ev = ClientMessage(type=33, send_event=1, display=dpy, window=children[i],
-                               message_type=lx.XInternAtom(dpy, b"WM_PROTOCOLS", 0), format=32)
-            ev.data[0] = lx.XInternAtom(dpy, b"WM_DELETE_WINDOW", 0)
-            lx.XSendEvent(dpy, children[i], 0, 0, ctypes.byref(ev))
-            lx.XFlush(dpy)
-            return True
-    return False
-
-
-def test_real_events_second_drag_shows_frames_esc_and_close_during_export(display, tmp_path, untrained):
-    """With the model's cost (an untrained lite checkpoint): a second drag 0.3 s after the first shows
-    frames while it moves (the first rest's full frame is interrupted); Esc during an export neither quits
-    nor cancels it; closing the window during an export asks first."""
-    libs = _xtest()
-    if libs is None:
-        pytest.skip("libXtst is not installed: cannot send real mouse and key events to Xvfb")
-    lx, lt = libs
-    out = tmp_path / "out"
-    out.mkdir()
-    steps = [
-        {"op": "load_sample"},
-        {"op": "wait_idle", "timeout": 240},
-        {"op": "grab_window", "path": str(tmp_path / "window.png")},
-        {"op": "sleep", "seconds": 6.0},  # the test drags twice now
-        {"op": "wait_idle", "timeout": 120},
-        {"op": "status"},
-        {"op": "set_export", "frames": 120, "size": 160, "fps": 8},  # long enough for Esc to land during it
-        {"op": "export", "path": str(out / "clip.mp4"), "wait": False},
-        {"op": "sleep", "seconds": 2.0},  # the test presses Esc now
-        {"op": "status"},
-        {"op": "wait_export", "timeout": 240},
-        {"op": "set_export", "frames": 400, "size": 256, "fps": 30},
-        {"op": "export", "path": str(out / "long.mp4"), "wait": False},
-        {"op": "sleep", "seconds": 2.0},  # the test closes the window now
-        {"op": "status"},
-        {"op": "quit"},
-    ]
-    marks: Dict[str, Any] = {}
-
-    def wait_for(report_path: Path, op: str, count: int = 1) -> Dict[str, Any]:
-        return wait_for_step(report_path, op, count, timeout=240)
-
-    def drag(dpy, x, y, seconds, dx_per_step):
-        lt.XTestFakeMotionEvent(dpy, -1, x, y, 0)
-        lt.XTestFakeButtonEvent(dpy, 1, 1, 0)
-        lx.XFlush(dpy)
-        n = int(seconds / 0.02)
-        for i in range(1, n + 1):
-            time.sleep(0.02)
-            lt.XTestFakeMotionEvent(dpy, -1, x + dx_per_step * i, y, 0)
-            lx.XFlush(dpy)
-        lt.XTestFakeButtonEvent(dpy, 1, 0, 0)
-        lx.XFlush(dpy)
-
-    def interact(report_path: Path) -> None:
-        rep = wait_for(report_path, "grab_window")
-        x0, y0, x1, y1 = step(rep, "grab_window")["result"]["box"]
-        x, y = x0 + (x1 - x0) // 4, (y0 + y1) // 2
-        dpy = lx.XOpenDisplay(display.encode())
-        assert dpy, f"cannot open display {display}"
-        try:
-            drag(dpy, x, y, 1.0, 1)
-            time.sleep(0.3)  # the full frame of this rest is rendering when the second drag starts
-            marks["second_start"] = time.monotonic()
-            drag(dpy, x + 50, y, 1.5, -1)
-            marks["second_end"] = time.monotonic()
-            wait_for(report_path, "export", 1)
-            time.sleep(0.5)
-            esc = lx.XKeysymToKeycode(dpy, lx.XStringToKeysym(b"Escape"))
-            lt.XTestFakeKeyEvent(dpy, esc, 1, 0)
-            lt.XTestFakeKeyEvent(dpy, esc, 0, 0)
-            lx.XFlush(dpy)
-            wait_for(report_path, "export", 2)
-            time.sleep(0.5)
-            marks["close_sent"] = _send_close_request(lx, dpy, b"stylize3d viewer")
-        finally:
-            lx.XCloseDisplay(dpy)
-
-    code, report = run_viewer(display, tmp_path, steps, ["--model", str(untrained)], during=interact)
-    check_ran(code, report)
-    shown = [t for t in report["stats"]["preview_shown"] if marks["second_start"] <= t <= marks["second_end"]]
-    assert len(shown) >= 2, f"the second drag showed {len(shown)} frames while it moved; {marks}, {report['stats']}"
-    moved = step(report, "status", 0)["result"]
-    assert moved["phase"] == "full"
-    esc = step(report, "status", 1)["result"]
-    assert esc["exporting"] and not esc["closing"], f"Esc stopped the export or quit: {esc}"
-    assert "Exported" in step(report, "wait_export")["result"]["status"]
-    assert (out / "clip.mp4").stat().st_size > 0
-    assert marks["close_sent"], "no window to close"
-    asked = step(report, "status", 2)["result"]
-    assert asked["dialog_open"] and asked["exporting"] and not asked["closing"], asked
-    assert not (out / "long.mp4").exists()  # quitting from the script cancelled it: nothing written
-
-
 def test_keyframe_editor_builds_a_path_exports_it_and_round_trips(display, tmp_path):
     keys = tmp_path / "keys.json"
     steps = [
@@ -513,45 +276,6 @@ def test_style_strip_mix_and_before_after(display, tmp_path, untrained):
     assert state["mix"] == 0.5 and state["compare"] is True and state["style2"].endswith(OTHER_STYLE.name)
     window = pixels(tmp_path / "window.png")
     assert window.std() > 20
-
-
-def test_real_wheel_up_moves_forwards(display, tmp_path):
-    libs = _xtest()
-    if libs is None:
-        pytest.skip("libXtst is not installed: cannot send real wheel events to Xvfb")
-    lx, lt = libs
-    steps = [
-        {"op": "load_sample"},
-        {"op": "wait_idle", "timeout": 120},
-        {"op": "grab_window", "path": str(tmp_path / "window.png")},
-        {"op": "sleep", "seconds": 3.0},  # the test turns the wheel up now
-        {"op": "state"},
-        {"op": "quit"},
-    ]
-
-    def interact(report_path: Path) -> None:
-        rep = wait_for_step(report_path, "grab_window")
-        x0, y0, x1, y1 = step(rep, "grab_window")["result"]["box"]
-        x, y = x0 + (x1 - x0) // 3, (y0 + y1) // 2
-        dpy = lx.XOpenDisplay(display.encode())
-        try:
-            lt.XTestFakeMotionEvent(dpy, -1, x, y, 0)
-            lx.XFlush(dpy)
-            time.sleep(0.3)
-            for i in range(3):  # X button 4 is wheel up
-                lt.XTestFakeButtonEvent(dpy, 4, 1, 0)
-                lt.XTestFakeButtonEvent(dpy, 4, 0, 0)
-                lx.XFlush(dpy)
-                time.sleep(0.2)
-                lt.XTestFakeMotionEvent(dpy, -1, x + i + 1, y, 0)  # Open3D hands the wheel over with the next event
-                lx.XFlush(dpy)
-                time.sleep(0.1)
-        finally:
-            lx.XCloseDisplay(dpy)
-
-    code, report = run_viewer(display, tmp_path, steps, ["--no-model"], during=interact)
-    check_ran(code, report)
-    assert step(report, "state")["result"]["pose"]["dolly"] > 0, "wheel up did not move forwards"
 
 
 def test_typed_paths_in_open_dialogs_and_recent_files_kept_between_runs(display, tmp_path, settings_dir):
