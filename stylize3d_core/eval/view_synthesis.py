@@ -36,6 +36,7 @@ import torch.nn.functional as F
 
 from ..checks import check_range, check_shape
 from ..errors import InputError
+from .metrics import psnr
 from ..models.checkpoint import Checkpoint, load_checkpoint
 from ..models.stylize3d import Stylize3DModel
 from ..train.cache import TrainDataset
@@ -102,8 +103,8 @@ def masked_psnr(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) ->
     """PSNR (dB) of (C, H, W) images in [0, 1] over ``mask`` (H, W); nan if the mask is empty."""
     if not bool(mask.any()):
         return math.nan
-    mse = float(((pred.double() - target.double())[:, mask] ** 2).mean())
-    return 10.0 * math.log10(1.0 / max(mse, PSNR_MSE_FLOOR))
+    hwc = lambda t: t.detach().cpu().permute(1, 2, 0)  # noqa: E731
+    return min(psnr(hwc(pred), hwc(target), mask.detach().cpu().numpy()), 10.0 * math.log10(1.0 / PSNR_MSE_FLOOR))
 
 
 def masked_ssim(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> float:

@@ -8,20 +8,21 @@ the hidden colour against the photo, on the hidden pixels within ``--near`` pixe
 card's outline (what the viewer's small moves uncover first) and on all of them (the
 layer is as wide as the camera range needs: here most of each card).
 
-Run from the repository root: ``.venv/bin/python -m benchmarks.bench_hidden_colour [--size 384]``
+    .venv/bin/python tests/benchmarks/bench_hidden_colour.py [--size 384]
 """
 
 from __future__ import annotations
 
 import argparse
-import math
 from typing import Iterator, Tuple
 
 import cv2
 import numpy as np
 
-from benchmarks.photos import test_photos
+from stylize3d_core.eval import metrics
 from stylize3d_core.scene.ldi import LDISettings, build_ldi
+
+from photos import test_photos  # this folder's module
 
 
 
@@ -48,7 +49,8 @@ def pasted_cards(size: int) -> Iterator[Tuple[str, np.ndarray, np.ndarray, np.nd
 
 
 def psnr(se: np.ndarray) -> float:
-    return 10.0 * math.log10(1.0 / max(float(se.mean()), 1e-12))
+    """PSNR (dB) of the squared errors ``se`` (one value per pixel and channel)."""
+    return metrics.psnr(np.sqrt(se), np.zeros_like(se))
 
 
 def main() -> None:
