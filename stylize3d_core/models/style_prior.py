@@ -36,7 +36,11 @@ contrast to at least :attr:`StylePriorSettings.min_contrast` of the photo's
 (stretching the painting's own lightness first, then adding the photo's
 lightness detail where the stretch would amplify only noise), and moves the
 mean lightness far enough from black or white for that contrast to fit; hue
-and chroma stay the painting's. Paintings with ordinary contrast are untouched.
+and chroma stay the painting's. A style with contrast of its own that ignores
+the scene (a line drawing, a tiny random image) paints strokes over a scene
+that is hardly there: the photo's lightness detail is added until half of that
+readable contrast follows the scene (:func:`scene_contrast`). Paintings whose
+contrast follows the scene are untouched.
 
 Nothing here is trained: the prior's weights are fixed; :mod:`stylize3d_core.train`
 only renders it into targets. Images are (H, W, 3) float32 in [0, 1], channels last.
@@ -233,15 +237,41 @@ class StylePrior:
 MAX_GAIN = 4.0
 """Largest stretch of the painted lightness contrast; beyond it the photo's lightness detail is added."""
 
+SCENE_SHARE = 0.5
+"""Share of the readable contrast (``min_contrast`` of the photo's lightness standard deviation) that must follow
+the scene (:func:`scene_contrast`) in a painting that has contrast enough of its own."""
+
+SCENE_BLUR = 2.0
+"""Gaussian sigma, in pixels of the painted image, applied before the painted lightness is compared with the
+photo's: the comparison is about the scene's shapes, not about brush strokes or pixel noise."""
+
+
+def scene_contrast(painted_l: np.ndarray, reference_l: np.ndarray) -> float:
+    """How much of a painted lightness map (H, W) follows the photo's (same size): its standard deviation
+    times its correlation with the photo's, both blurred by :data:`SCENE_BLUR` (negative where the painting
+    inverts the scene; 0 where either map is flat)."""
+    a = cv2.GaussianBlur(np.asarray(painted_l, np.float32), (0, 0), SCENE_BLUR).ravel().astype(np.float64)
+    b = cv2.GaussianBlur(np.asarray(reference_l, np.float32), (0, 0), SCENE_BLUR).ravel().astype(np.float64)
+    a, b = a - a.mean(), b - b.mean()
+    den = float(np.sqrt((a * a).sum() * (b * b).sum()))
+    if den <= 1e-12:
+        return 0.0
+    return float((a * b).sum() / den) * float(np.asarray(painted_l, np.float64).std())
+
 
 def keep_readable(painted: Sequence[np.ndarray], reference: np.ndarray, min_contrast: float) -> List[np.ndarray]:
     """``painted`` images with their lightness contrast raised to ``min_contrast`` of ``reference``'s.
 
     One lightness map for all images, fitted on the first (the layers of one LDI keep matching colours):
     with L* the CIE lightness, ``s`` the first painted image's L* standard deviation and ``s0`` the
-    reference's, nothing changes when ``s >= min_contrast s0``; otherwise the painted L* is stretched
-    about its mean by ``g = min(target / s, MAX_GAIN)``, the rest of the target contrast comes from the
-    (same-sized) reference's own L* detail, and the mean moves into ``[2.5 target, 100 - 2.5 target]``.
+    reference's, a painting with contrast enough (``s >= target = min_contrast s0``) changes only when
+    too little of that contrast follows the scene (:func:`scene_contrast` below ``SCENE_SHARE target``:
+    a line drawing or a tiny random style paints strokes of its own over the whole frame): the
+    reference's own L* detail is added up to that share, and the mean moves into
+    ``[2.5 share, 100 - 2.5 share]`` so that it fits. Otherwise (a flat painting) the painted L* is
+    stretched about its mean by ``g = min(target / s, MAX_GAIN)``, the rest of the target contrast comes
+    from the (same-sized) reference's own L* detail, and the mean moves into
+    ``[2.5 target, 100 - 2.5 target]``.
     """
     out = [np.asarray(p, np.float32) for p in painted]
     if not out or min_contrast <= 0.0:
@@ -252,8 +282,23 @@ def keep_readable(painted: Sequence[np.ndarray], reference: np.ndarray, min_cont
     first = labs[0][..., 0]
     s, mean = float(first.std()), float(first.mean())
     target = min_contrast * s0
-    if s >= target or target <= 1e-3:
+    if target <= 1e-3:
         return out
+    if s >= target:
+        need = SCENE_SHARE * target
+        scene = scene_contrast(first, ref_l)
+        if scene >= need:
+            return out
+        detail = (need - max(scene, 0.0)) / max(s0, 1e-6)
+        shift = float(np.clip(mean, 2.5 * need, 100.0 - 2.5 * need)) - mean
+        result = []
+        for lab in labs:
+            ref = ref_l if lab.shape[:2] == ref_l.shape else cv2.resize(ref_l, (lab.shape[1], lab.shape[0]),
+                                                                        interpolation=cv2.INTER_AREA)
+            lab = lab.copy()
+            lab[..., 0] = np.clip(lab[..., 0] + shift + (ref - mean0) * detail, 0.0, 100.0)
+            result.append(np.clip(cv2.cvtColor(lab, cv2.COLOR_LAB2RGB), 0.0, 1.0).astype(np.float32))
+        return result
     gain = min(target / max(s, 1e-6), MAX_GAIN)
     detail = max(0.0, target - gain * s) / max(s0, 1e-6)  # share of the reference's own L* contrast added
     new_mean = float(np.clip(mean, 2.5 * target, 100.0 - 2.5 * target))

@@ -9,7 +9,7 @@ import pytest
 from stylize3d_core.errors import InputError
 from stylize3d_core.models.style_prior import (
     STYLE_VECTOR_SIZE, StylePrior, StylePriorSettings, _free_spatial_dims, _model_bytes, interpolate_vectors,
-    keep_readable,
+    SCENE_SHARE, keep_readable, scene_contrast,
 )
 
 
@@ -71,9 +71,22 @@ def test_flat_styles_still_show_the_scene(prior):
         assert 5.0 < grey(out).mean() < 95.0
 
 
-def test_keep_readable_leaves_contrasty_paintings_alone_and_fixes_flat_ones():
+def _lightness(img):
+    return cv2.cvtColor(np.clip(img, 0, 1).astype(np.float32), cv2.COLOR_RGB2LAB)[..., 0]
+
+
+def test_scene_contrast_known_values():
+    rng = np.random.default_rng(0)
+    light = cv2.GaussianBlur(rng.random((48, 64)).astype(np.float32), (0, 0), 4.0) * 100.0
+    assert scene_contrast(light, light) == pytest.approx(light.std(), rel=1e-5)
+    assert scene_contrast(100.0 - light, light) == pytest.approx(-light.std(), rel=1e-5)
+    assert scene_contrast(np.full_like(light, 40.0), light) == 0.0
+    assert scene_contrast(light, np.full_like(light, 40.0)) == 0.0
+
+
+def test_keep_readable_leaves_contrasty_paintings_of_the_scene_alone_and_fixes_flat_ones():
     ref = _stripes(40, 60)
-    painted = np.clip(_stripes(40, 60, 3.0)[..., ::-1] * 1.1, 0, 1).astype(np.float32)
+    painted = np.clip(ref ** 1.3 * 1.1, 0, 1).astype(np.float32)  # other tones, the same scene
     np.testing.assert_array_equal(keep_readable([painted], ref, 0.5)[0], painted)
     flat = np.full((40, 60, 3), 0.02, np.float32)
     fixed = keep_readable([flat, flat], ref, 0.5)
@@ -98,3 +111,21 @@ def test_bad_inputs(prior):
     with pytest.raises(InputError):
         StylePriorSettings(min_contrast=2.0)
     assert prior.paint([], np.zeros(STYLE_VECTOR_SIZE)) == []
+
+
+def test_keep_readable_adds_the_scene_under_strokes_that_ignore_it():
+    """A contrasty painting whose strokes do not follow the photo (a line drawing) gets the photo's lightness
+    detail up to SCENE_SHARE of the readable contrast; its strokes stay, its hue stays."""
+    ref = _stripes(64, 96, 9.0)
+    y, x = np.mgrid[0:64, 0:96].astype(np.float32)
+    lines = np.where(((x + 2 * y) % 11.0) < 2.0, 0.05, 0.95).astype(np.float32)
+    painted = np.stack([lines, lines, 0.9 * lines], -1)
+    l_ref, l_in = _lightness(ref), _lightness(painted)
+    need = SCENE_SHARE * 0.5 * l_ref.std()
+    assert l_in.std() >= 0.5 * l_ref.std() and scene_contrast(l_in, l_ref) < 0.5 * need  # the case handled
+    out = keep_readable([painted, painted], ref, 0.5)
+    l_out = _lightness(out[0])
+    assert scene_contrast(l_out, l_ref) >= 0.8 * need
+    assert np.corrcoef(l_out.ravel(), l_in.ravel())[0, 1] > 0.8  # the strokes are still the frame's
+    np.testing.assert_array_equal(out[0], out[1])  # one map for every layer
+    assert np.isfinite(out[0]).all() and out[0].min() >= 0.0 and out[0].max() <= 1.0
