@@ -2,7 +2,7 @@
 
     .venv/bin/python tools/make_depth_prior_sheet.py [--photos /work/shared/data/photos]
         [--out docs/depth_prior_sheet.png] [--before REV]
-        [--boards /tmp/depth_boards] [--key /tmp/depth_boards_key.json]
+        [--boards /tmp/depth_boards] [--key /tmp/depth_boards_key.json] [--unseen 16 --out /tmp/unseen.png]
 
 For each photo of :data:`PHOTOS` (chosen for variety: portrait, close-up,
 indoor table top, street, vehicles in front, landscape slopes, aerial views,
@@ -15,14 +15,16 @@ training data and are not copied into the repository: only the sheet is.
 With ``--boards``, one PNG per photo for a blind review: the photo on top, the
 two depth maps below it side by side in a random order labelled only "A" and
 "B"; the key (which letter is "after") goes to ``--key``, outside the boards
-folder.
+folder. ``--unseen N`` makes the sheet and boards of N other photos, drawn at random, for a review on
+photos that did not steer the prior.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import importlib.util
+import json
+import random
 from pathlib import Path
 from typing import List
 
@@ -107,13 +109,20 @@ def main() -> None:
     parser.add_argument("--boards", type=Path, default=None)
     parser.add_argument("--key", type=Path, default=Path("/tmp/depth_boards_key.json"))
     parser.add_argument("--seed", type=int, default=36)
+    parser.add_argument("--unseen", type=int, default=0, metavar="N",
+                        help="instead of the sheet's photos, N others of --photos drawn at random (--unseen-seed)")
+    parser.add_argument("--unseen-seed", type=int, default=2026)
     args = parser.parse_args()
+    photos = PHOTOS
+    if args.unseen:
+        others = sorted(p.name for p in args.photos.glob("*.jpg") if p.name not in PHOTOS)
+        photos = {name: "not on the sheet" for name in random.Random(args.unseen_seed).sample(others, args.unseen)}
     before = load_prior_at(args.before)
     rng = np.random.default_rng(args.seed)
     blocks, key = [], {}
     if args.boards is not None:
         args.boards.mkdir(parents=True, exist_ok=True)
-    for i, (name, what) in enumerate(PHOTOS.items()):
+    for i, (name, what) in enumerate(photos.items()):
         rgb = load_image(args.photos / name).rgb
         d_before = colour_depth(before.estimate_prior(rgb).depth)
         d_after = colour_depth(prior_after.estimate_prior(rgb).depth)
