@@ -56,7 +56,7 @@ from .points.sampling import start_fps_process
 from .render.plain import StratifiedOrder, preview_point_count
 from .render.rasterize import RASTER_BACKENDS, warm_up_async
 from .render.rasterizer import columns
-from .scene.layer_images import hidden_layer_image, layer_colours
+from .scene.layer_images import hidden_layer_image, layer_colours, match_hidden_seam
 from .scene.photo3d import Photo3D
 
 
@@ -451,6 +451,7 @@ class Stylized3DPhoto:
         t0 = time.perf_counter()
         ldi = self.photo.ldi
         layer0, layer1 = self._prior().paint([ldi.rgb, hidden_layer_image(ldi)], vector)
+        layer1 = match_hidden_seam(ldi, layer0, layer1)
         colours = layer_colours(self.photo.points, ldi, layer0, layer1)  # (N, 3) in the photo's point order
         ordered = torch.from_numpy(colours).index_select(0, self._order)
         self._painted[key] = ordered

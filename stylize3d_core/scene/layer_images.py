@@ -7,12 +7,18 @@ stylize-then-bake baseline) works on two canvas images (Hc, Wc, 3):
 * layer 1: :func:`hidden_layer_image` (the hidden layer's colours where it
   exists, layer 0's elsewhere, so the 2D operation sees their context).
 
+A 2D operation that depends on context (a style network) gives the hidden pixels
+colours that need not continue layer 0's result on the surface the hidden layer
+extends: a novel view would show a seam where the two meet.
+:func:`match_hidden_seam` carries layer 0's result across that border.
+
 :func:`layer_colours` gives every point the colour of its own pixel in its own
 layer's image. Images are float, channels last.
 """
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from ..checks import check_shape
@@ -32,6 +38,56 @@ def hidden_layer_image(ldi: LDI) -> np.ndarray:
     if not isinstance(ldi, LDI):
         raise InputError("ldi", f"expected an LDI, got {type(ldi).__name__}")
     return np.where(ldi.hidden_mask[..., None], ldi.hidden_rgb, ldi.rgb).astype(np.float32)
+
+
+SEAM_SIGMA = 6.0
+"""Gaussian sigma, in canvas pixels, over which :func:`match_hidden_seam` spreads the difference between
+the two layer images from the border into the hidden layer (it fades out over about twice that)."""
+
+SEAM_DEPTH_TOLERANCE = 0.1
+"""A layer-0 pixel beside the hidden layer is on the surface the hidden layer continues (not on the
+occluder in front of it) when its depth is at least ``1 - SEAM_DEPTH_TOLERANCE`` times the hidden depth
+there."""
+
+
+def match_hidden_seam(ldi: LDI, layer0: np.ndarray, layer1: np.ndarray) -> np.ndarray:
+    """``layer1`` (the processed :func:`hidden_layer_image`) continued seamlessly from ``layer0`` (the
+    processed ``ldi.rgb``), both (Hc, Wc, 3) float in [0, 1]; returns a new float32 image.
+
+    The seam lies between the hidden pixels and the layer-0 pixels beside them (within 2 px) that are on
+    the surface the hidden layer continues (:data:`SEAM_DEPTH_TOLERANCE`; the occluder's pixels beside it
+    are never seen next to it). There the difference ``layer0 - layer1`` is what a view would show as a
+    step; it is spread into the hidden pixels by normalised Gaussian smoothing (:data:`SEAM_SIGMA`) and
+    added to them, full at the border and fading to nothing about ``2 SEAM_SIGMA`` inside, so the hidden
+    layer keeps its own processed texture and only its offset near the border changes. Pixels outside the
+    hidden layer are returned unchanged; an LDI without a hidden layer returns ``layer1`` as it is.
+    """
+    if not isinstance(ldi, LDI):
+        raise InputError("ldi", f"expected an LDI, got {type(ldi).__name__}")
+    hc, wc = ldi.canvas_size
+    for name, img in (("layer0", layer0), ("layer1", layer1)):
+        check_shape(img, name, (hc, wc, 3))
+    out = np.array(layer1, dtype=np.float32)
+    hidden = ldi.hidden_mask
+    if not hidden.any():
+        return out
+    blur = lambda a, s: cv2.GaussianBlur(a, (0, 0), s, borderType=cv2.BORDER_CONSTANT)  # noqa: E731
+    h = hidden.astype(np.float32)
+    near = blur(h, 1.5)  # the hidden layer's neighbourhood, and its depth there
+    hidden_depth = blur(np.where(hidden, ldi.hidden_depth, 0.0).astype(np.float32), 1.5) / np.maximum(near, 1e-6)
+    band = (cv2.dilate(hidden.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0) & ~hidden
+    anchor = (band & (near > 1e-3) & (ldi.depth >= (1.0 - SEAM_DEPTH_TOLERANCE) * hidden_depth)).astype(np.float32)
+    if not anchor.any():
+        return out
+    step = (np.asarray(layer0, np.float32) - out) * anchor[..., None]
+    weight = blur(anchor, SEAM_SIGMA)
+    spread = np.stack([blur(np.ascontiguousarray(step[..., c]), SEAM_SIGMA) for c in range(3)], -1)
+    spread /= np.maximum(weight, 1e-6)[..., None]
+    # full strength up to where the weight is that of a straight 2-pixel border SEAM_SIGMA away, then fading
+    reference = 2.0 / (np.sqrt(2.0 * np.pi) * SEAM_SIGMA) * float(np.exp(-0.5))
+    fade = np.clip(weight / reference, 0.0, 1.0) * (weight > 1e-4)
+    out[hidden] = np.clip(out[hidden] + spread[hidden] * fade[hidden, None], 0.0, 1.0)
+    return out
 
 
 def layer_colours(points: PointCloud, ldi: LDI, layer0: np.ndarray, layer1: np.ndarray) -> np.ndarray:

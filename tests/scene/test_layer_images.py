@@ -1,0 +1,82 @@
+"""The LDI's two layer images: the hidden layer continued from layer 0 across its border (match_hidden_seam)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from stylize3d_core.errors import InputError
+from stylize3d_core.scene.layer_images import SEAM_SIGMA, hidden_layer_image, match_hidden_seam
+from stylize3d_core.scene.ldi import LDISettings, build_ldi
+
+WALL, CARD, OFFSET = 0.3, 0.9, 0.15
+
+
+@pytest.fixture(scope="module")
+def card_ldi():
+    """A card at depth 1 in front of a wall at depth 3: the hidden layer lies under the card's rim."""
+    size, lo, hi = 192, 40, 152
+    card = np.zeros((size, size), bool)
+    card[lo:hi, lo:hi] = True
+    rgb = np.where(card[..., None], np.float32([1, 0, 0]), np.float32([0, 0, 1])).astype(np.float32)
+    depth = np.where(card, 1.0, 3.0).astype(np.float32)
+    ldi = build_ldi(rgb, depth, LDISettings(band=0.25))  # a hidden rim about 48 px wide
+    assert ldi.hidden_mask.sum() > 100
+    return ldi
+
+
+def _layers(ldi):
+    """Two processed layer images of the same wall that differ by a context-dependent offset: layer 0 is WALL
+    on the wall and CARD on the card; layer 1 (the wall continued under the card's rim) is WALL + OFFSET on
+    the wall and the hidden pixels, and dark on the card (a step towards the occluder that must not count)."""
+    on_card = ldi.depth < 2.0 * ldi.depth_scale  # card at 1, wall at 3 (scene units times the scale)
+    ones = np.ones(3, np.float32)
+    layer0 = np.where(on_card[..., None], CARD, WALL) * ones
+    layer1 = np.where(on_card[..., None] & ~ldi.hidden_mask[..., None], 0.0, WALL + OFFSET) * ones
+    return layer0.astype(np.float32), layer1.astype(np.float32)
+
+
+def _distance_to_wall(ldi):
+    import cv2
+
+    wall = (ldi.depth >= 2.0 * ldi.depth_scale) & ~ldi.hidden_mask
+    return cv2.distanceTransform((~wall).astype(np.uint8), cv2.DIST_L2, 5)
+
+
+def test_the_hidden_layer_continues_the_surface_it_extends_and_never_the_occluder(card_ldi):
+    layer0, layer1 = _layers(card_ldi)
+    out = match_hidden_seam(card_ldi, layer0, layer1)
+    hidden = card_ldi.hidden_mask
+    dist = _distance_to_wall(card_ldi)
+    at_border = hidden & (dist <= 2)
+    assert at_border.sum() > 20
+    # at the border layer 0's colour of the wall: the offset between the two images is gone ...
+    assert np.abs(out[at_border] - WALL).max() < 0.03
+    # ... never pulled by the card in front (the occluder is no anchor, its step is ignored)
+    assert out[hidden].min() >= WALL - 1e-3 and out[hidden].max() <= WALL + OFFSET + 1e-6
+    # far inside, the hidden layer keeps its own result
+    deep = hidden & (dist >= 3.5 * SEAM_SIGMA)
+    assert deep.sum() > 100
+    assert np.abs(out[deep] - (WALL + OFFSET)).max() < 0.02
+    # outside the hidden layer nothing changes
+    np.testing.assert_array_equal(out[~hidden], layer1[~hidden])
+    assert out.dtype == np.float32 and np.isfinite(out).all() and out.min() >= 0.0 and out.max() <= 1.0
+
+
+def test_a_seamless_pair_and_a_photo_without_hidden_layer_are_unchanged(card_ldi):
+    layer0, _ = _layers(card_ldi)
+    same = np.where(card_ldi.hidden_mask[..., None], WALL, layer0).astype(np.float32)
+    np.testing.assert_allclose(match_hidden_seam(card_ldi, layer0, same), same, atol=1e-6)  # no offset: no change
+    flat = build_ldi(np.full((32, 48, 3), 0.5, np.float32), np.full((32, 48), 2.0, np.float32))
+    assert not flat.hidden_mask.any()
+    image = np.random.default_rng(0).random((*flat.canvas_size, 3)).astype(np.float32)
+    np.testing.assert_array_equal(match_hidden_seam(flat, image, image), image)
+
+
+def test_the_layer_images_and_their_sizes_are_checked(card_ldi):
+    layer0, layer1 = _layers(card_ldi)
+    assert hidden_layer_image(card_ldi).shape == layer0.shape
+    with pytest.raises(InputError, match="layer1"):
+        match_hidden_seam(card_ldi, layer0, layer1[:-1])
+    with pytest.raises(InputError, match="ldi"):
+        match_hidden_seam("not an ldi", layer0, layer1)
