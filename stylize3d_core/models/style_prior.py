@@ -284,19 +284,22 @@ def keep_readable(painted: Sequence[np.ndarray], reference: np.ndarray, min_cont
     target = min_contrast * s0
     if target <= 1e-3:
         return out
+
+    def ref_at(lab: np.ndarray) -> np.ndarray:  # the reference's L* at an image's size
+        return ref_l if lab.shape[:2] == ref_l.shape else cv2.resize(ref_l, (lab.shape[1], lab.shape[0]),
+                                                                     interpolation=cv2.INTER_AREA)
+
     if s >= target:
         need = SCENE_SHARE * target
-        scene = scene_contrast(first, ref_l)
+        scene = scene_contrast(first, ref_at(labs[0]))
         if scene >= need:
             return out
         detail = (need - max(scene, 0.0)) / max(s0, 1e-6)
         shift = float(np.clip(mean, 2.5 * need, 100.0 - 2.5 * need)) - mean
         result = []
         for lab in labs:
-            ref = ref_l if lab.shape[:2] == ref_l.shape else cv2.resize(ref_l, (lab.shape[1], lab.shape[0]),
-                                                                        interpolation=cv2.INTER_AREA)
             lab = lab.copy()
-            lab[..., 0] = np.clip(lab[..., 0] + shift + (ref - mean0) * detail, 0.0, 100.0)
+            lab[..., 0] = np.clip(lab[..., 0] + shift + (ref_at(lab) - mean0) * detail, 0.0, 100.0)
             result.append(np.clip(cv2.cvtColor(lab, cv2.COLOR_LAB2RGB), 0.0, 1.0).astype(np.float32))
         return result
     gain = min(target / max(s, 1e-6), MAX_GAIN)
@@ -304,9 +307,7 @@ def keep_readable(painted: Sequence[np.ndarray], reference: np.ndarray, min_cont
     new_mean = float(np.clip(mean, 2.5 * target, 100.0 - 2.5 * target))
 
     def deviation(lab: np.ndarray) -> np.ndarray:
-        ref = ref_l if lab.shape[:2] == ref_l.shape else cv2.resize(ref_l, (lab.shape[1], lab.shape[0]),
-                                                                    interpolation=cv2.INTER_AREA)
-        return (lab[..., 0] - mean) * gain + (ref - mean0) * detail
+        return (lab[..., 0] - mean) * gain + (ref_at(lab) - mean0) * detail
 
     # the two parts are correlated (both follow the scene): one more scale brings the first image to the target
     spread = float(deviation(labs[0]).std())
