@@ -9,9 +9,7 @@ The window itself is driven by ``test_viewer_applications_gui`` at the end (Xvfb
 
 from __future__ import annotations
 
-import importlib.util
 import json
-from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any, List
@@ -36,19 +34,10 @@ from stylize3d_core.multiview import save_views
 from stylize3d_core.pipeline import PhotoSpec
 from stylize3d_core.render.plain import frame_size
 
+import viewer_gui_helpers as gui_helpers  # tests/support: the shared Xvfb fixture and viewer runner
+from viewer_gui_helpers import display  # noqa: F401 (a fixture)
+
 MAX_SIZE = 96
-
-
-def _gui_helpers():
-    """tests/app/viewer_gui_helpers.py's Xvfb fixture and viewer runner (the tests import in importlib mode)."""
-    spec = importlib.util.spec_from_file_location("viewer_gui_helpers", Path(__file__).with_name("viewer_gui_helpers.py"))
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-_GUI = _gui_helpers()
-display = _GUI.display  # the module's private Xvfb (a fixture)
 
 
 class SyncWorker:
@@ -442,9 +431,9 @@ def test_viewer_applications_gui(display, untrained, tmp_path):
         {"op": "screenshot", "path": str(tmp_path / "cleared.png")},
         {"op": "quit"},
     ]
-    code, report = _GUI.run_viewer(display, tmp_path, steps, ["--model", str(untrained)])
-    _GUI.check_ran(code, report)
-    assert "GrabCut" in _GUI.step(report, "app_menu", 0)["result"]["status"]
+    code, report = gui_helpers.run_viewer(display, tmp_path, steps, ["--model", str(untrained)])
+    gui_helpers.check_ran(code, report)
+    assert "GrabCut" in gui_helpers.step(report, "app_menu", 0)["result"]["status"]
     assert [e for e in report["errors"] if "camera" in e] and len(report["errors"]) == 1, report["errors"]
     sbs = iio.imread(tmp_path / "sbs.mp4", index=None)
     assert sbs.shape[0] == 4 and sbs.shape[2] == 96  # half width: the two eyes squeezed into one frame

@@ -13,7 +13,6 @@ files the script produced. Without Xvfb the tests are skipped with the reason.
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import shutil
 from pathlib import Path
@@ -25,23 +24,11 @@ from PIL import Image
 
 from stylize3d_app.viewer.xserver import xtest_click
 
+from viewer_gui_helpers import display  # noqa: F401 (the module's Xvfb, a fixture)
+from viewer_gui_helpers import OTHER_STYLE, REPO, check_ran, pixels, run_viewer, step, wait_for_step
+from viewer_gui_helpers import xtest as _xtest
+
 pytestmark = [pytest.mark.gui, pytest.mark.slow]  # each test starts Open3D in a subprocess: 8-30 s
-
-
-def _gui_helpers():
-    """tests/app/viewer_gui_helpers.py (the tests import in importlib mode: loaded by its path)."""
-    spec = importlib.util.spec_from_file_location("viewer_gui_helpers", Path(__file__).with_name("viewer_gui_helpers.py"))
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-_GUI = _gui_helpers()
-display = _GUI.display  # the module's private Xvfb (a fixture)
-REPO, OTHER_STYLE = _GUI.REPO, _GUI.OTHER_STYLE
-run_viewer, check_ran, wait_for_step, pixels, step = (_GUI.run_viewer, _GUI.check_ran, _GUI.wait_for_step,
-                                                      _GUI.pixels, _GUI.step)
-_xtest = _GUI.xtest
 
 
 def test_open_orbit_export_and_survive_bad_files(display, tmp_path):

@@ -8,7 +8,6 @@ Each test is skipped where Xvfb or libXtst is missing; the scripted sessions are
 from __future__ import annotations
 
 import ctypes
-import importlib.util
 import time
 from pathlib import Path
 from typing import Any, Dict
@@ -16,22 +15,11 @@ from typing import Any, Dict
 import numpy as np
 import pytest
 
+from viewer_gui_helpers import display  # noqa: F401 (the module's Xvfb, a fixture)
+from viewer_gui_helpers import check_ran, pixels, run_viewer, step, wait_for_step
+from viewer_gui_helpers import xtest as _xtest
+
 pytestmark = [pytest.mark.gui, pytest.mark.slow]  # each test starts Open3D in a subprocess: 8-30 s
-
-
-def _gui_helpers():
-    """tests/app/viewer_gui_helpers.py (the tests import in importlib mode: loaded by its path)."""
-    spec = importlib.util.spec_from_file_location("viewer_gui_helpers", Path(__file__).with_name("viewer_gui_helpers.py"))
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-_GUI = _gui_helpers()
-display = _GUI.display  # the module's private Xvfb (a fixture)
-run_viewer, check_ran, wait_for_step, pixels, step = (_GUI.run_viewer, _GUI.check_ran, _GUI.wait_for_step,
-                                                      _GUI.pixels, _GUI.step)
-_xtest = _GUI.xtest
 
 
 def test_real_mouse_drag_and_key_press(display, tmp_path):

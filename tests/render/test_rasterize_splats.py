@@ -3,9 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
 import math
-from pathlib import Path
 
 import pytest
 import torch
@@ -15,11 +13,7 @@ from stylize3d_core.geometry.camera import Cameras, intrinsics_from_fov
 from stylize3d_core.render import PointRasterizer, RasterSettings, rasterize_points
 from stylize3d_core.render.rasterize_reference import rasterize_points_reference
 
-_spec = importlib.util.spec_from_file_location("raster_cases", Path(__file__).with_name("raster_cases.py"))
-_cases = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_cases)
-F64, simple_K, point_at, scene, random_scene = _cases.F64, _cases.simple_K, _cases.point_at, _cases.scene, _cases.random_scene
-assert_no_nan, assert_matches_reference = _cases.assert_no_nan, _cases.assert_matches_reference
+from raster_cases import F64, assert_matches_reference, point_at, random_scene, scene, simple_K
 
 
 @pytest.fixture(params=["fast", "reference"])

@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import importlib.util
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,10 +11,7 @@ from stylize3d_core.geometry.camera import NEAR_DEPTH
 from stylize3d_core.geometry.camera_range import CameraRange
 from stylize3d_core.scene.ldi import LDISettings, build_ldi
 
-_spec = importlib.util.spec_from_file_location("ldi_cases", Path(__file__).with_name("ldi_cases.py"))
-_cases = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_cases)
-square_scene, photo, inner_outline, outer_outline = _cases.square_scene, _cases.photo, _cases.inner_outline, _cases.outer_outline
+from ldi_cases import inner_outline, outer_outline, photo, square_scene
 
 
 # ---------------------------------------------------------------- (f) sized for the camera range

@@ -1,4 +1,4 @@
-"""Shared scenes and outline helpers of the LDI tests (``test_ldi*.py`` load this file by its path)."""
+"""Shared scenes and outline helpers of the LDI tests (``tests/scene/test_ldi*.py``; tests/support is on pytest's path)."""
 
 from __future__ import annotations
 

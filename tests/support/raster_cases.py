@@ -1,4 +1,4 @@
-"""Shared cases of the rasterizer tests (``test_rasterize*.py`` load this file by its path: tests are no package)."""
+"""Shared cases of the rasterizer tests (``tests/render/test_rasterize*.py``; tests/support is on pytest's path)."""
 
 from __future__ import annotations
 

@@ -2,7 +2,8 @@
 private Xvfb per test module (the ``display`` fixture), the viewer run in a ``spawn`` subprocess with a
 test script and a timeout, and readers of its report and screenshots.
 
-Not a test module: the tests run in pytest's importlib mode, so each one loads this file by its path.
+Not a test module: the tests import it by name (pytest's ``pythonpath`` in pyproject.toml puts tests/support
+on the path).
 """
 
 from __future__ import annotations
