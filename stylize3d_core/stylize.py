@@ -56,7 +56,7 @@ from .points.sampling import start_fps_process
 from .render.plain import StratifiedOrder, preview_point_count
 from .render.rasterize import RASTER_BACKENDS, warm_up_async
 from .render.rasterizer import columns
-from .scene.layer_images import hidden_layer_image, layer_colours, match_hidden_seam
+from .scene.layer_images import hidden_layer_image, layer_colours, match_hidden_seam, seam_anchors
 from .scene.photo3d import Photo3D
 
 
@@ -319,6 +319,7 @@ class Stylized3DPhoto:
         self._vector2: Optional[np.ndarray] = None  # ... of the second style
         self._own_vector: Optional[np.ndarray] = None  # ... of the photo itself (strength < 1)
         self._painted: "OrderedDict[bytes, torch.Tensor]" = OrderedDict()  # vector -> (N, 3) prior colours, ordered
+        self._seam: Optional[tuple] = None  # (seam_anchors of the photo's LDI, possibly None), made at the first painting
         self._dense: Optional[torch.Tensor] = None  # (N, Cr) in self._order
         self._palette_target: Optional[LabStats] = None  # what the palette map aims at (set with the dense features)
         self._palette: Optional[Palette] = None  # the map the last render used (its size's, from self._palettes)
@@ -451,7 +452,9 @@ class Stylized3DPhoto:
         t0 = time.perf_counter()
         ldi = self.photo.ldi
         layer0, layer1 = self._prior().paint([ldi.rgb, hidden_layer_image(ldi)], vector)
-        layer1 = match_hidden_seam(ldi, layer0, layer1)
+        if self._seam is None:
+            self._seam = (seam_anchors(ldi),)  # once per photo: the seam does not depend on the painting
+        layer1 = match_hidden_seam(ldi, layer0, layer1, self._seam[0])
         colours = layer_colours(self.photo.points, ldi, layer0, layer1)  # (N, 3) in the photo's point order
         ordered = torch.from_numpy(colours).index_select(0, self._order)
         self._painted[key] = ordered

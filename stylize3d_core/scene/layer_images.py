@@ -18,6 +18,8 @@ layer's image. Images are float, channels last.
 
 from __future__ import annotations
 
+from typing import NamedTuple, Optional
+
 import cv2
 import numpy as np
 
@@ -50,17 +52,49 @@ occluder in front of it) when its depth is at least ``1 - SEAM_DEPTH_TOLERANCE``
 there."""
 
 
-def match_hidden_seam(ldi: LDI, layer0: np.ndarray, layer1: np.ndarray) -> np.ndarray:
+class SeamAnchors(NamedTuple):
+    """What :func:`match_hidden_seam` needs of an LDI alone (the same for every painting of it):
+    :func:`seam_anchors`."""
+
+    hidden: np.ndarray  # (Hc, Wc) bool, the hidden layer's pixels
+    anchor: np.ndarray  # (Hc, Wc) float32, 1 on the layer-0 pixels of the surface the hidden layer continues
+    weight: np.ndarray  # (Hc, Wc) float32, the anchors smoothed by SEAM_SIGMA
+    fade: np.ndarray  # (M,) float32, the correction's strength at each hidden pixel (``hidden`` order)
+
+
+def seam_anchors(ldi: LDI) -> Optional[SeamAnchors]:
+    """The seam of ``ldi`` between its hidden layer and the layer-0 pixels beside it (within 2 px) that are on
+    the surface the hidden layer continues (:data:`SEAM_DEPTH_TOLERANCE`; the occluder's pixels beside it are
+    never seen next to it), and how strongly each hidden pixel follows it; None where there is no such seam."""
+    if not isinstance(ldi, LDI):
+        raise InputError("ldi", f"expected an LDI, got {type(ldi).__name__}")
+    hidden = ldi.hidden_mask
+    if not hidden.any():
+        return None
+    near = _blur(hidden.astype(np.float32), 1.5)  # the hidden layer's neighbourhood, and its depth there
+    hidden_depth = _blur(np.where(hidden, ldi.hidden_depth, 0.0).astype(np.float32), 1.5) / np.maximum(near, 1e-6)
+    band = (cv2.dilate(hidden.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0) & ~hidden
+    anchor = (band & (near > 1e-3) & (ldi.depth >= (1.0 - SEAM_DEPTH_TOLERANCE) * hidden_depth)).astype(np.float32)
+    if not anchor.any():
+        return None
+    weight = _blur(anchor, SEAM_SIGMA)
+    # full strength up to where the weight is that of a straight 2-pixel border SEAM_SIGMA away, then fading
+    reference = 2.0 / (np.sqrt(2.0 * np.pi) * SEAM_SIGMA) * float(np.exp(-0.5))
+    fade = (np.clip(weight / reference, 0.0, 1.0) * (weight > 1e-4))[hidden].astype(np.float32)
+    return SeamAnchors(hidden, anchor, weight, fade)
+
+
+def match_hidden_seam(ldi: LDI, layer0: np.ndarray, layer1: np.ndarray,
+                      anchors: Optional[SeamAnchors] = None) -> np.ndarray:
     """``layer1`` (the processed :func:`hidden_layer_image`) continued seamlessly from ``layer0`` (the
     processed ``ldi.rgb``), both (Hc, Wc, 3) float in [0, 1]; returns a new float32 image.
 
-    The seam lies between the hidden pixels and the layer-0 pixels beside them (within 2 px) that are on
-    the surface the hidden layer continues (:data:`SEAM_DEPTH_TOLERANCE`; the occluder's pixels beside it
-    are never seen next to it). There the difference ``layer0 - layer1`` is what a view would show as a
-    step; it is spread into the hidden pixels by normalised Gaussian smoothing (:data:`SEAM_SIGMA`) and
-    added to them, full at the border and fading to nothing about ``2 SEAM_SIGMA`` inside, so the hidden
-    layer keeps its own processed texture and only its offset near the border changes. Pixels outside the
-    hidden layer are returned unchanged; an LDI without a hidden layer returns ``layer1`` as it is.
+    On the seam (:func:`seam_anchors`; pass them to paint one LDI several times) the difference
+    ``layer0 - layer1`` is what a view would show as a step; it is spread into the hidden pixels by
+    normalised Gaussian smoothing (:data:`SEAM_SIGMA`) and added to them, full at the border and fading to
+    nothing about ``2 SEAM_SIGMA`` inside, so the hidden layer keeps its own processed texture and only its
+    offset near the border changes. Pixels outside the hidden layer are returned unchanged; an LDI without
+    a seam returns ``layer1`` as it is.
     """
     if not isinstance(ldi, LDI):
         raise InputError("ldi", f"expected an LDI, got {type(ldi).__name__}")
@@ -68,26 +102,18 @@ def match_hidden_seam(ldi: LDI, layer0: np.ndarray, layer1: np.ndarray) -> np.nd
     for name, img in (("layer0", layer0), ("layer1", layer1)):
         check_shape(img, name, (hc, wc, 3))
     out = np.array(layer1, dtype=np.float32)
-    hidden = ldi.hidden_mask
-    if not hidden.any():
+    seam = seam_anchors(ldi) if anchors is None else anchors
+    if seam is None:
         return out
-    blur = lambda a, s: cv2.GaussianBlur(a, (0, 0), s, borderType=cv2.BORDER_CONSTANT)  # noqa: E731
-    h = hidden.astype(np.float32)
-    near = blur(h, 1.5)  # the hidden layer's neighbourhood, and its depth there
-    hidden_depth = blur(np.where(hidden, ldi.hidden_depth, 0.0).astype(np.float32), 1.5) / np.maximum(near, 1e-6)
-    band = (cv2.dilate(hidden.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0) & ~hidden
-    anchor = (band & (near > 1e-3) & (ldi.depth >= (1.0 - SEAM_DEPTH_TOLERANCE) * hidden_depth)).astype(np.float32)
-    if not anchor.any():
-        return out
-    step = (np.asarray(layer0, np.float32) - out) * anchor[..., None]
-    weight = blur(anchor, SEAM_SIGMA)
-    spread = np.stack([blur(np.ascontiguousarray(step[..., c]), SEAM_SIGMA) for c in range(3)], -1)
-    spread /= np.maximum(weight, 1e-6)[..., None]
-    # full strength up to where the weight is that of a straight 2-pixel border SEAM_SIGMA away, then fading
-    reference = 2.0 / (np.sqrt(2.0 * np.pi) * SEAM_SIGMA) * float(np.exp(-0.5))
-    fade = np.clip(weight / reference, 0.0, 1.0) * (weight > 1e-4)
-    out[hidden] = np.clip(out[hidden] + spread[hidden] * fade[hidden, None], 0.0, 1.0)
+    step = (np.asarray(layer0, np.float32) - out) * seam.anchor[..., None]
+    spread = _blur(step, SEAM_SIGMA)[seam.hidden] / np.maximum(seam.weight[seam.hidden], 1e-6)[:, None]
+    out[seam.hidden] = np.clip(out[seam.hidden] + spread * seam.fade[:, None], 0.0, 1.0)
     return out
+
+
+def _blur(image: np.ndarray, sigma: float) -> np.ndarray:
+    """Gaussian smoothing with zeros beyond the canvas (every channel of an (H, W, C) image)."""
+    return cv2.GaussianBlur(image, (0, 0), sigma, borderType=cv2.BORDER_CONSTANT)
 
 
 def layer_colours(points: PointCloud, ldi: LDI, layer0: np.ndarray, layer1: np.ndarray) -> np.ndarray:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from stylize3d_core.errors import InputError
-from stylize3d_core.scene.layer_images import SEAM_SIGMA, hidden_layer_image, match_hidden_seam
+from stylize3d_core.scene.layer_images import SEAM_SIGMA, hidden_layer_image, match_hidden_seam, seam_anchors
 from stylize3d_core.scene.ldi import LDISettings, build_ldi
 
 WALL, CARD, OFFSET = 0.3, 0.9, 0.15
@@ -60,6 +60,8 @@ def test_the_hidden_layer_continues_the_surface_it_extends_and_never_the_occlude
     assert np.abs(out[deep] - (WALL + OFFSET)).max() < 0.02
     # outside the hidden layer nothing changes
     np.testing.assert_array_equal(out[~hidden], layer1[~hidden])
+    # the seam made once for the LDI gives the same result (what a second painting of the photo reuses)
+    np.testing.assert_array_equal(match_hidden_seam(card_ldi, layer0, layer1, seam_anchors(card_ldi)), out)
     assert out.dtype == np.float32 and np.isfinite(out).all() and out.min() >= 0.0 and out.max() <= 1.0
 
 
@@ -68,7 +70,7 @@ def test_a_seamless_pair_and_a_photo_without_hidden_layer_are_unchanged(card_ldi
     same = np.where(card_ldi.hidden_mask[..., None], WALL, layer0).astype(np.float32)
     np.testing.assert_allclose(match_hidden_seam(card_ldi, layer0, same), same, atol=1e-6)  # no offset: no change
     flat = build_ldi(np.full((32, 48, 3), 0.5, np.float32), np.full((32, 48), 2.0, np.float32))
-    assert not flat.hidden_mask.any()
+    assert not flat.hidden_mask.any() and seam_anchors(flat) is None
     image = np.random.default_rng(0).random((*flat.canvas_size, 3)).astype(np.float32)
     np.testing.assert_array_equal(match_hidden_seam(flat, image, image), image)
 
