@@ -36,11 +36,11 @@ import torch.nn.functional as F
 
 from ..checks import check_range, check_shape
 from ..errors import InputError
-from .metrics import psnr
 from ..models.checkpoint import Checkpoint, load_checkpoint
 from ..models.stylize3d import Stylize3DModel
 from ..train.cache import TrainDataset
 from ..train.data import KINDS, TrainSample
+from .metrics import psnr
 
 PSNR_MSE_FLOOR = 1e-10
 """Smallest MSE used in PSNR (identical images score 100 dB, not infinity)."""
