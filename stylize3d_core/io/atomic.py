@@ -30,8 +30,8 @@ import contextlib
 import errno
 import json
 import os
+import secrets
 import shutil
-import tempfile
 from pathlib import Path
 from typing import Callable, Iterator, List, Optional, Union
 
@@ -160,17 +160,20 @@ def atomic_path(
     parent = dest.parent if str(dest.parent) else Path(".")
     if not parent.is_dir():
         raise ExportError(f"{dest}: folder {parent} does not exist")
+    # The name is chosen before anything is created, and the creation happens inside the ``try``
+    # whose clean-up removes it: a signal (Ctrl-C raises in the main thread between any two
+    # bytecodes) landing the instant the temporary exists still has it removed.
+    tmp: Optional[Path] = None
     try:
         if directory:
-            tmp = Path(tempfile.mkdtemp(prefix=f".{dest.name}.", suffix=".partial", dir=parent))
-            os.chmod(tmp, 0o777 & ~_umask())
+            tmp = _unused_name(parent, f".{dest.name}.", ".partial")
         else:
-            fd, name = tempfile.mkstemp(prefix=f".{dest.stem}.", suffix=f".partial{dest.suffix}", dir=parent)
-            os.close(fd)
-            tmp = Path(name)
-    except OSError as e:
-        raise ExportError(f"{dest}: cannot create a file in {parent}: {describe_os_error(e)}") from e
-    try:
+            tmp = _unused_name(parent, f".{dest.stem}.", f".partial{dest.suffix}")
+        try:
+            _create(tmp, directory=directory, dest=dest)
+        except ExportError:
+            tmp = None  # nothing of ours exists under that name (it may be another process's)
+            raise
         yield tmp
         if directory:
             if verify is not None:
@@ -186,14 +189,40 @@ def atomic_path(
             else:
                 verify_by_suffix(tmp, dest)
             _run_commit_checks()
-            # mkstemp (and some writers, e.g. safetensors) create 0600 files: give it a normal file's mode.
+            # some writers (safetensors) recreate the file as 0600: give it a normal file's mode.
             _rename(lambda: (os.chmod(tmp, 0o666 & ~_umask()), os.replace(tmp, dest)), dest)
     except BaseException:
-        if tmp.is_dir():
+        if tmp is None:
+            pass
+        elif tmp.is_dir():
             shutil.rmtree(tmp, ignore_errors=True)
         else:
             tmp.unlink(missing_ok=True)
         raise
+
+
+def _unused_name(parent: Path, prefix: str, suffix: str) -> Path:
+    """A random name in ``parent`` that nothing has yet (created by :func:`_create`, exclusively)."""
+    for _ in range(100):
+        candidate = parent / f"{prefix}{secrets.token_hex(5)}{suffix}"
+        if not os.path.lexists(candidate):
+            return candidate
+    raise ExportError(f"{parent}: cannot find an unused temporary name; nothing was written")
+
+
+def _create(tmp: Path, *, directory: bool, dest: Path) -> None:
+    """Create the empty temporary file or folder ``tmp`` (the umask gives it a normal mode).
+
+    Exclusive: if something appeared under that name meanwhile (another process), this fails rather
+    than take it over.
+    """
+    try:
+        if directory:
+            os.mkdir(tmp, 0o777)
+        else:
+            os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+    except OSError as e:
+        raise ExportError(f"{dest}: cannot create a file in {tmp.parent}: {describe_os_error(e)}") from e
 
 
 def _rename(step: Callable[[], object], dest: Path) -> None:
@@ -207,13 +236,19 @@ def _rename(step: Callable[[], object], dest: Path) -> None:
 
 
 def _replace_folder(tmp: Path, dest: Path, parent: Path) -> None:
-    if dest.exists():
-        old = Path(tempfile.mkdtemp(prefix=f".{dest.name}.", suffix=".old", dir=parent))
-        os.replace(dest, old / dest.name)
+    if not dest.exists():
         os.replace(tmp, dest)
-        shutil.rmtree(old, ignore_errors=True)
-    else:
+        return
+    old = _unused_name(parent, f".{dest.name}.", ".old")
+    try:
+        os.replace(dest, old)  # two renames of folders, each atomic
         os.replace(tmp, dest)
+    finally:  # also on an interruption between the two: the user's folder goes back in place
+        if old.exists():
+            if dest.exists():
+                shutil.rmtree(old, ignore_errors=True)
+            else:
+                os.replace(old, dest)
 
 
 def write_atomically(

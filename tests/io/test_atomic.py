@@ -132,3 +132,88 @@ def test_a_failing_commit_check_keeps_the_old_output(tmp_path, directory):
         else:
             tmp.write_text("new")
     assert (dest / "new.txt").exists() if directory else dest.read_text() == "new"
+
+
+
+@pytest.mark.parametrize("directory", [False, True])
+def test_a_signal_the_instant_the_temporary_exists_leaves_nothing_behind(tmp_path, monkeypatch, directory):
+    # Ctrl-C raised right after the temporary was created, before the writer ever runs (Python runs
+    # signal handlers between any two bytecodes): the clean-up must already cover it.
+    import signal
+
+    from stylize3d_core.io import atomic
+
+    dest = tmp_path / ("out" if directory else "out.png")
+    if directory:
+        dest.mkdir()
+        (dest / "a").write_bytes(b"old")
+    else:
+        dest.write_bytes(b"old")
+    real = atomic._create
+
+    def create_then_signal(*args, **kwargs):
+        real(*args, **kwargs)
+        os.kill(os.getpid(), signal.SIGINT)  # default_int_handler raises KeyboardInterrupt
+
+    monkeypatch.setattr(atomic, "_create", create_then_signal)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    wrote = []
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with atomic_path(dest, directory=directory) as tmp:
+                wrote.append(tmp)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert wrote == []  # interrupted before the writer started
+    assert sorted(p.name for p in tmp_path.iterdir()) == [dest.name]
+    assert (dest / "a" if directory else dest).read_bytes() == b"old"
+
+
+def test_a_name_taken_meanwhile_is_an_error_and_is_not_removed(tmp_path, monkeypatch):
+    from stylize3d_core.io import atomic
+
+    taken = tmp_path / ".out.taken.partial.png"
+    taken.write_bytes(b"another process's")
+    monkeypatch.setattr(atomic, "_unused_name", lambda parent, prefix, suffix: taken)
+    with pytest.raises(ExportError, match="cannot create a file"):
+        with atomic_path(tmp_path / "out.png"):
+            pass
+    assert taken.read_bytes() == b"another process's"
+
+
+def test_temporaries_get_a_normal_mode_from_the_umask(tmp_path):
+    old = os.umask(0o027)
+    try:
+        with atomic_path(tmp_path / "d", directory=True) as tmp:
+            assert tmp.stat().st_mode & 0o777 == 0o750
+        with atomic_path(tmp_path / "f.json") as tmp:
+            assert tmp.stat().st_mode & 0o777 == 0o640
+            tmp.write_text("{}")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "d").is_dir() and (tmp_path / "f.json").read_text() == "{}"
+
+
+def test_an_interruption_between_the_folder_renames_puts_the_old_folder_back(tmp_path, monkeypatch):
+    from stylize3d_core.io import atomic
+
+    dest = tmp_path / "frames"
+    dest.mkdir()
+    (dest / "frame_0000.png").write_bytes(b"old frame")
+    real_replace = os.replace
+    calls = []
+
+    def interrupted_second_rename(src, dst):
+        calls.append((src, dst))
+        if len(calls) == 2:  # the old folder moved aside; the new one not yet in place
+            raise KeyboardInterrupt
+        return real_replace(src, dst)
+
+    with pytest.raises(KeyboardInterrupt):
+        with atomic_path(dest, directory=True) as tmp:
+            (tmp / "frame_0000.png").write_bytes(b"new frame")
+            monkeypatch.setattr(atomic.os, "replace", interrupted_second_rename)
+    monkeypatch.undo()
+    assert len(calls) == 3  # aside, (interrupted), back
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["frames"]
+    assert (dest / "frame_0000.png").read_bytes() == b"old frame"

@@ -147,10 +147,14 @@ def test_write_atomically_names_the_file_and_the_reason(tmp_path):
 
 
 def test_an_uncreatable_temporary_file_is_an_export_error(tmp_path, monkeypatch):
-    def refuse(*_a, **_k):
-        raise PermissionError(errno.EACCES, "Permission denied")
+    real_open = os.open
 
-    monkeypatch.setattr(atomic.tempfile, "mkstemp", refuse)
+    def refuse_new_files(path, flags, *args, **kwargs):
+        if flags & os.O_CREAT:  # root writes into read-only folders: refuse the creation itself
+            raise PermissionError(errno.EACCES, "Permission denied")
+        return real_open(path, flags, *args, **kwargs)
+
+    monkeypatch.setattr(atomic.os, "open", refuse_new_files)
     with pytest.raises(ExportError, match="cannot create a file in .*permission denied"):
         write_ply(tmp_path / "c.ply", np.zeros((10, 3)), np.zeros((10, 3)))
 
