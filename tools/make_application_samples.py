@@ -9,9 +9,9 @@ Writes to ``--out``:
   Open3D ``trajectory.json``), with ``view0.png`` ... and their depth files: a
   procedural scene ray-cast from three poses (``eval/multiview.py``).
 
-With ``--figures``, renders one figure per application (the shipped lite model,
-a shipped style): ``apps_multiview.png``, ``apps_layered.png``, ``apps_layered_person.png``,
-``apps_stereo_card.png``, ``apps_exports.png``.
+With ``--figures``, renders one figure per application (the shipped lite model, Renoir's *The Bridge
+at Chatou*, a shipped public-domain painting): ``apps_multiview.png``, ``apps_layered.png``,
+``apps_layered_person.png``, ``apps_stereo_card.png``, ``apps_exports.png``.
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ from stylize3d_core.scene.photo3d import Photo3D, Photo3DSettings  # noqa: E402
 from stylize3d_core.scene.pointcloud import PointCloud  # noqa: E402
 from stylize3d_core.stylize import Stylized3DPhoto, StylizeSettings  # noqa: E402
 
-STYLE = ROOT / "assets/styles/painting_style03_coffee.jpg"
+STYLE = ROOT / "assets/styles/renoir_bridge_at_chatou.jpg"  # a public-domain painting (assets/styles/README.md)
 SIDE = np.eye(4)
 SIDE[0, 3], SIDE[1, 3] = 0.05, -0.02  # a view to the right of the photo's camera
 

@@ -2,10 +2,10 @@
 
     xvfb-run -a -s "-screen 0 1280x800x24" .venv/bin/python tools/make_viewer_applications.py [--out docs/viewer_applications.png]
 
-Runs the viewer with a test script (``app/viewer/script.py``) on the astronaut sample with
-``painting_style03_coffee.jpg`` and the shipped model, in an empty settings folder: the GrabCut dialog,
-the layered view it gives from a camera moved to the side, the side-by-side export dialog, and the
-centre-view choice for a views file (the procedural views of ``tools/make_application_samples.py``).
+Runs the viewer with a test script (``app/viewer/script.py``) on the astronaut sample with Renoir's
+*The Bridge at Chatou* (``renoir_bridge_at_chatou.jpg``) and the shipped model, in an empty settings folder:
+the GrabCut dialog, the layered view it gives from a camera moved to the side, the side-by-side export
+dialog, and the centre-view choice for a views file (the procedural views of ``tools/make_application_samples.py``).
 Needs an X display (``$DISPLAY``).
 """
 
@@ -39,7 +39,7 @@ def main() -> None:
         grabs = [str(t / f"grab{i}.png") for i in range(4)]
         steps = [
             {"op": "open_photo", "path": str(sample_photo("astronaut.jpg"))},
-            {"op": "open_style", "path": str(style_image("painting_style03_coffee.jpg"))},
+            {"op": "open_style", "path": str(style_image("renoir_bridge_at_chatou.jpg"))},
             {"op": "wait_idle", "timeout": 240},
             {"op": "app_menu", "item": "MENU_GRABCUT", "ok": True, "grab": grabs[0],
              "fields": {"left": 0.117, "top": 0.04, "right": 0.76, "bottom": 1.0, "strength": 0.0}},
