@@ -45,6 +45,13 @@ the ``width``-channel layers run at 1/2 and 1/4 resolution.
 (the shipped ``lite`` checkpoint's) gives the same coefficients at every pixel, its bias: the head's
 convolution and the full-resolution upsampling of 12 channels are skipped (:func:`constant_transform`).
 
+**Covered pixels pass through:** where the transform head is the constant identity and the texture
+residual zero (:meth:`UNetDecoder.passes_covered_colours`; the shipped ``lite`` checkpoint), a pixel the
+points cover (mask 1) shows ``d`` whatever the U-Net computes. Under ``torch.no_grad``/``inference_mode`` the
+decoder then returns the colours and runs the U-Net only on a crop around the pixels with a mask below 1
+(holes, partly covered pixels) with :data:`UNetDecoder.HOLE_CONTEXT` pixels of context, or not at all where
+there are none (a full frame of a photo seen from near its own camera usually has none).
+
 **Sizes.** H and W need not be divisible by ``2**levels``: the input is
 zero-padded at the bottom/right (padding counts as holes: features 0, mask 0)
 and the output cropped back.
@@ -473,6 +480,8 @@ class UNetDecoder(nn.Module):
                                         "torch.inference_mode(), without bfloat16)")
         self._check(features, mask)
         mask = mask.to(features.dtype)
+        if self._covered_pass_through():
+            return self._decode_uncovered(features, mask, should_stop, bfloat16)
         if self.config.supersample:
             features, mask = supersample_pool(features, mask)
         h, w = features.shape[-2:]
@@ -501,6 +510,65 @@ class UNetDecoder(nn.Module):
             _stop(should_stop)
             rgb = apply_colour_transform(rgb, colours, mask, coefficients, padded, texture)
         return rgb.contiguous()
+
+    def passes_covered_colours(self) -> bool:
+        """Whether a covered pixel (mask 1) shows its points' colours ``d`` unchanged whatever the U-Net
+        computes: the colour transform's head is the constant identity (zero weights, the identity as its
+        bias) and the texture residual is zero (zero weights and bias), so ``out = rgb + 1 * (d - rgb) = d``.
+        The U-Net is then needed only where the mask is below 1 (see :meth:`forward`)."""
+        head = self.transform
+        if head is None or head.weight.count_nonzero() != 0:
+            return False
+        if not torch.equal(head.bias.detach(), torch.tensor(IDENTITY_TRANSFORM, dtype=head.bias.dtype)):
+            return False
+        rows = self.out_rgb
+        return bool(rows.weight[3:].count_nonzero() == 0 and rows.bias[3:].count_nonzero() == 0)
+
+    def _covered_pass_through(self) -> bool:
+        """Whether :meth:`forward` decodes only the uncovered pixels: inference, no supersampling, and
+        :meth:`passes_covered_colours`. Those pixels always take the torch U-Net (a crop's size changes from
+        frame to frame, and torch is the faster runtime for small ones)."""
+        return not torch.is_grad_enabled() and not self.config.supersample and self.passes_covered_colours()
+
+    HOLE_CONTEXT = 32
+    """Pixels of context kept around the uncovered pixels when only they are decoded (a multiple of
+    ``2**levels``): the lite U-Net's output at a pixel depends on its input within 16 pixels (two stride-2
+    levels of 3 x 3 convolutions, ``tests/models/test_decoder.py`` checks it), so a crop with this margin
+    decodes its uncovered pixels as the whole frame does, up to float rounding."""
+    CROP_FRACTION = 0.5
+    """Above this share of the frame the crop around the uncovered pixels is not worth it: the whole frame
+    is decoded."""
+
+    def _decode_uncovered(self, features: torch.Tensor, mask: torch.Tensor, should_stop: StopCheck,
+                          bfloat16: bool) -> torch.Tensor:
+        """:meth:`forward` where :meth:`passes_covered_colours` holds: the colours where the mask is 1; the
+        U-Net (on the smallest grid-aligned crop holding every uncovered pixel and
+        :data:`HOLE_CONTEXT` pixels around them, or the whole frame) where it is below 1."""
+        colours = features[:, -self.config.transform_channels:]
+        out = colours.clamp(0.0, 1.0).contiguous()
+        uncovered = (mask < 1.0).any(dim=0)[0]  # (H, W), over the batch
+        if not bool(uncovered.any()):
+            _stop(should_stop)
+            return out
+        h, w = uncovered.shape
+        rows = torch.nonzero(uncovered.any(dim=1)).flatten()
+        cols = torch.nonzero(uncovered.any(dim=0)).flatten()
+        step, margin = 2 ** self.config.levels, self.HOLE_CONTEXT
+        r0 = max(0, int(rows[0]) - margin) // step * step  # the grid's phase kept: the crop decodes as the frame
+        c0 = max(0, int(cols[0]) - margin) // step * step
+        r1, c1 = min(h, int(rows[-1]) + 1 + margin), min(w, int(cols[-1]) + 1 + margin)
+        if (r1 - r0) * (c1 - c0) > self.CROP_FRACTION * h * w:
+            r0, c0, r1, c1 = 0, 0, h, w
+        y, coefficients, padded = self._unet(features[..., r0:r1, c0:c1], mask[..., r0:r1, c0:c1], should_stop,
+                                             bfloat16, torch.autocast("cpu", dtype=torch.bfloat16) if bfloat16
+                                             else contextlib.nullcontext())
+        rgb = torch.sigmoid(y.contiguous()[:, :3])
+        _stop(should_stop)
+        m = mask[..., r0:r1, c0:c1]
+        crop = apply_colour_transform(rgb, colours[..., r0:r1, c0:c1], m, coefficients, padded)  # no texture
+        window = out[..., r0:r1, c0:c1]
+        window.copy_(torch.where(m < 1.0, crop, window))  # covered pixels keep their colours exactly
+        return out
 
     def _unet(self, features: torch.Tensor, mask: torch.Tensor, should_stop: StopCheck, bfloat16: bool,
               amp) -> Tuple[torch.Tensor, Optional[torch.Tensor], Tuple[int, int]]:

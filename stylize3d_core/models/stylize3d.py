@@ -59,7 +59,7 @@ from ..points import interpolate
 from ..render.rasterize import Fragments, RasterSettings
 from ..render.rasterizer import PointRasterizer
 from .adaattn import AdaAttNConfig, AdaAttNStylizer, blend
-from .decoder import DecoderConfig, UNetDecoder, identity_transform, zero_texture
+from .decoder import IDENTITY_TRANSFORM, DecoderConfig, UNetDecoder, identity_transform, zero_texture
 from .encoder import Encoder, EncoderConfig
 from .scene_geometry import NeighbourhoodConfig, SceneGeometry, prepare_geometry
 
@@ -332,11 +332,41 @@ def add_style_prior(model: Stylize3DModel) -> Stylize3DModel:
     return wide
 
 
+def settle_pass_through(model: Stylize3DModel, tolerance: float = 2e-3) -> Tuple[Stylize3DModel, float]:
+    """A copy of a model whose colour transform lies within ``tolerance`` of the identity and whose texture
+    residual's weights lie within it of zero (as :func:`add_style_prior` set them, where training hardly
+    moved them), with both set exactly: covered pixels then show the detail colours unchanged and the
+    decoder skips the U-Net there (``UNetDecoder.passes_covered_colours``). Returns the copy and the largest
+    weight change. Raises :class:`InputError` where a weight is farther than ``tolerance``: that model's
+    heads do change the colours."""
+    cfg = model.config
+    if not (cfg.decoder.transform_channels and cfg.decoder.texture_channels):
+        raise InputError("model", "has no colour transform and texture residual to settle")
+    check_range(tolerance, "tolerance", 0.0, 1.0)
+    dec = model.decoder
+    gaps = {
+        "transform weights": dec.transform.weight.detach().abs().max(),
+        "transform bias": (dec.transform.bias.detach() - torch.tensor(IDENTITY_TRANSFORM)).abs().max(),
+        "texture weights": dec.out_rgb.weight.detach()[3:].abs().max(),
+        "texture bias": dec.out_rgb.bias.detach()[3:].abs().max(),
+    }
+    far = {k: float(v) for k, v in gaps.items() if float(v) > tolerance}
+    if far:
+        raise InputError("model", "its colour transform or texture residual is not negligible (largest "
+                         + ", ".join(f"{k} {v:.3g}" for k, v in far.items()) + f" > {tolerance:g})")
+    settled = Stylize3DModel(cfg)
+    settled.load_state_dict(model.state_dict())
+    identity_transform(settled.decoder.transform, True)
+    zero_texture(settled.decoder.out_rgb)
+    settled.train(model.training)
+    return settled, max(float(v) for v in gaps.values())
+
+
 def count_parameters(module: nn.Module) -> int:
     """Number of trainable parameters."""
     return sum(p.numel() for p in module.parameters() if p.requires_grad)
 
 
 __all__ = [
-    "DETAIL_CHANNELS", "add_colour_transform", "add_detail_path", "add_style_prior", "add_texture_residual", "ModelConfig", "NeighbourhoodConfig", "SceneGeometry", "prepare_geometry", "Stylize3DModel", "count_parameters",
+    "DETAIL_CHANNELS", "add_colour_transform", "add_detail_path", "add_style_prior", "add_texture_residual", "settle_pass_through", "ModelConfig", "NeighbourhoodConfig", "SceneGeometry", "prepare_geometry", "Stylize3DModel", "count_parameters",
 ]
