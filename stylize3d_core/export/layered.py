@@ -32,7 +32,7 @@ from ..render.holes import fill_holes
 from ..render.plain import PlainRenderer, PlainRenderSettings
 from ..render.rasterize import RasterSettings
 from ..render.rasterizer import PointRasterizer
-from ..scene.masks import check_mask, grabcut_mask, load_mask_file, parse_rect, person_mask, point_mask
+from ..scene.masks import check_mask, grabcut_mask, load_mask_file, parse_rect, person_mask
 from ..scene.photo3d import Photo3D
 
 PERSON = "person"

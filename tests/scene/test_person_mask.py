@@ -166,21 +166,15 @@ def test_viewer_person_item_makes_the_layers(untrained):
 
 def test_viewer_controller_person_item(untrained):
     """The Applications menu's "Foreground: person (automatic)" through the controller, with the
-    stand-in window of tests/app/test_viewer_applications.py (its worker runs each task at once)."""
-    import importlib.util
-    from pathlib import Path
-
+    stand-in window of tests/support/viewer_app_helpers.py (its worker runs each task at once)."""
     import stylize3d_app.viewer.applications as A
     from stylize3d_app.viewer.session import ViewerSession
     from stylize3d_core.pipeline import PhotoSpec
+    from viewer_app_helpers import StandInWindow  # tests/support
 
-    path = Path(__file__).parents[1] / "app" / "test_viewer_applications.py"
-    spec = importlib.util.spec_from_file_location("viewer_applications_helpers", path)
-    helpers = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(helpers)
     s = ViewerSession(str(untrained))
     s.load_photo(PhotoSpec(str(sample_photo("astronaut.jpg")), "prior", max_size=128))
-    window = helpers.StandInWindow(s)
+    window = StandInWindow(s)
     c = window.applications
     assert A.MENU_PERSON in c.menu_callbacks()
     c.person()

@@ -46,7 +46,6 @@ def build_ldi(
     image = _check_rgb(rgb)
     z = _check_depth(depth, image.shape[:2])
     h, w = z.shape
-    long_side = max(h, w)
     q1 = float(np.percentile(z, 1.0))
     depth_scale = NEAR_DEPTH / q1
     nd = (q1 / z).astype(np.float32)  # (H, W) = NEAR_DEPTH / (depth_scale * z)
