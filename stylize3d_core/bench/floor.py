@@ -3,7 +3,8 @@
 The work of one stylized full frame (the targets' case: the sample photo at 1 MP, frames
 512 pixels on the long side) is counted, not guessed:
 
-* decoder: every ``nn.Conv2d`` the U-Net runs, from the shapes a forward hook sees:
+* decoder: every ``nn.Conv2d`` the U-Net runs on the whole frame (what it costs where no pixel passes
+  through: the shipped decoder skips it on covered pixels), from the shapes a forward hook sees:
   ``2 * out.numel() * in_channels / groups * kh * kw`` FLOPs, and the bytes of its input,
   output and weights once each (float32; element-wise layers, padding and concatenation
   are not counted, so this is a lower bound on the bytes);
@@ -175,7 +176,10 @@ def run_floor(out: Path, quick: bool = False, show_progress: bool = False, log: 
     with torch.inference_mode():
         frags = raster(xyz, feats, cam)
     image = frags.image.unsqueeze(0)
-    mask = (~frags.hole).to(image.dtype)[None, None]
+    # every pixel marked uncovered: the whole U-Net runs (the shipped decoder passes covered pixels through
+    # and decodes only the uncovered ones, UNetDecoder.passes_covered_colours); its cost does not depend on
+    # the mask's values
+    mask = torch.zeros_like(frags.hole, dtype=image.dtype)[None, None]
     convs = decoder_work(decoder, image, mask)
     next(steps)
 
