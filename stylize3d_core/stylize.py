@@ -48,7 +48,7 @@ from .models.colour_transfer import ColourTransfer, LabStats, lab_stats, mix_sta
 from .models import decoder_onnx
 from .models.decoder import native_bfloat16
 from .models.palette import Palette, apply_palette, fit_palette, palette_target
-from .models.style_prior import StylePrior, StylePriorSettings, interpolate_vectors
+from .models.style_prior import StylePrior, StylePriorSettings, interpolate_vectors, paint_layer_images
 from .models.style_features import StyleEncoder, StyleFeatures
 from .models.scene_geometry import SceneGeometry, prepare_geometry
 from .models.stylize3d import Stylize3DModel
@@ -56,7 +56,7 @@ from .points.sampling import start_fps_process
 from .render.plain import StratifiedOrder, preview_point_count
 from .render.rasterize import RASTER_BACKENDS, warm_up_async
 from .render.rasterizer import columns
-from .scene.layer_images import hidden_layer_image, layer_colours, match_hidden_seam, seam_anchors
+from .scene.layer_images import layer_colours, match_hidden_seam, seam_anchors
 from .scene.photo3d import Photo3D
 
 
@@ -451,7 +451,7 @@ class Stylized3DPhoto:
             return hit
         t0 = time.perf_counter()
         ldi = self.photo.ldi
-        layer0, layer1 = self._prior().paint([ldi.rgb, hidden_layer_image(ldi)], vector)
+        layer0, layer1 = paint_layer_images(self._prior(), ldi, vector)
         if self._seam is None:
             self._seam = (seam_anchors(ldi),)  # once per photo: the seam does not depend on the painting
         layer1 = match_hidden_seam(ldi, layer0, layer1, self._seam[0])

@@ -31,7 +31,7 @@ def with_prior(tmp_path_factory):
 
 def test_style_prior_colours_reach_the_frame(with_prior):
     """With the identity transform, the photo's own view shows the prior's painting of layer 0."""
-    from stylize3d_core.scene.layer_images import hidden_layer_image
+    from stylize3d_core.models.style_prior import paint_layer_images
 
     s = with_prior
     cam = Cameras.identity(s.photo.fov_y_deg)
@@ -40,7 +40,7 @@ def test_style_prior_colours_reach_the_frame(with_prior):
     s.set_style(style)
     frame = s.render(cam, 48, 64)
     ldi = s.photo.ldi
-    painted = s._prior().paint([ldi.rgb, hidden_layer_image(ldi)], s._vector)[0]
+    painted = paint_layer_images(s._prior(), ldi, s._vector)[0]
     p = ldi.pad
     crop = painted[p:p + 48, p:p + 64]
     assert np.abs(frame - crop).mean() < 0.03  # the rasterized points carry their pixel's painted colour

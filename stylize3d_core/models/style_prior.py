@@ -193,18 +193,22 @@ class StylePrior:
             raise InputError(name, "the style network gave no finite style vector for it")
         return vec
 
-    def work_size(self, height: int, width: int) -> tuple:
-        """(h, w) an image of (height, width) is painted at: long side ``settings.size``, multiples of 4."""
-        scale = self.settings.size / max(height, width)
+    def work_size(self, height: int, width: int, size: Optional[int] = None) -> tuple:
+        """(h, w) an image of (height, width) is painted at: long side ``size`` (default ``settings.size``),
+        multiples of 4."""
+        scale = (self.settings.size if size is None else size) / max(height, width)
         return (max(STRIDE, int(round(height * scale / STRIDE)) * STRIDE),
                 max(STRIDE, int(round(width * scale / STRIDE)) * STRIDE))
 
-    def paint(self, images: Sequence[np.ndarray], vector: np.ndarray) -> List[np.ndarray]:
+    def paint(self, images: Sequence[np.ndarray], vector: np.ndarray, size: Optional[int] = None) -> List[np.ndarray]:
         """Paint images of one size with one style vector; each result has its image's size.
 
         Args:
             images: (H, W, 3) float images in [0, 1], all the same size (the graph paints one at a time).
             vector: (100,) style vector (:meth:`style_vector`, or an interpolation of such vectors).
+            size: long side, in pixels, the images are painted at (default ``settings.size``; at least
+                :data:`STRIDE`): a part of a larger image painted with its marks at the same size as the
+                whole's gives ``settings.size`` times the part's share of the whole's long side.
         Returns:
             (H, W, 3) float32 images in [0, 1].
         """
@@ -217,7 +221,9 @@ class StylePrior:
         vec = np.asarray(vector, dtype=np.float32).reshape(-1)
         if vec.shape != (STYLE_VECTOR_SIZE,) or not np.isfinite(vec).all():
             raise InputError("vector", f"expected {STYLE_VECTOR_SIZE} finite numbers, got shape {vec.shape}")
-        wh, ww = self.work_size(h, w)
+        if size is not None and (isinstance(size, bool) or not isinstance(size, int) or not STRIDE <= size <= 4096):
+            raise InputError("size", f"must be an integer from {STRIDE} to 4096 (pixels), got {size!r}")
+        wh, ww = self.work_size(h, w, size)
         down = cv2.INTER_AREA if wh < h else cv2.INTER_CUBIC
         result = []
         for im in imgs:
@@ -232,6 +238,27 @@ class StylePrior:
                 painted = cv2.resize(painted, (w, h), interpolation=cv2.INTER_CUBIC)
             result.append(np.clip(painted, 0.0, 1.0))
         return keep_readable(result, imgs[0], self.settings.min_contrast)
+
+
+def paint_layer_images(prior: StylePrior, ldi, vector: np.ndarray) -> List[np.ndarray]:
+    """The painted layer-0 canvas and hidden-layer image of ``ldi`` (each (Hc, Wc, 3)).
+
+    Each layer image is painted twice, its photo region alone (mirrored outward by a small margin,
+    :func:`~stylize3d_core.scene.layer_images.photo_with_margin`) and the whole canvas, the marks at the
+    same size in both (the region's share of ``settings.size``), and joined
+    (:func:`~stylize3d_core.scene.layer_images.join_photo_painting`): the photo as the network paints the
+    photo itself, the border from the canvas's painting, continuing the photo's colours. Without a border
+    the canvas is the photo: one painting each."""
+    from ..scene.layer_images import hidden_layer_image, join_photo_painting, photo_with_margin
+
+    images = [ldi.rgb, hidden_layer_image(ldi)]
+    canvas = prior.paint(images, vector)
+    if ldi.pad == 0:
+        return canvas
+    parts = [photo_with_margin(ldi, im) for im in images]
+    size = max(STRIDE, int(round(prior.settings.size * max(parts[0].shape[:2]) / max(ldi.canvas_size))))
+    photo = prior.paint(parts, vector, size=size)
+    return [join_photo_painting(ldi, c, p) for c, p in zip(canvas, photo)]
 
 
 MAX_GAIN = 4.0

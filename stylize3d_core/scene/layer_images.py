@@ -42,6 +42,71 @@ def hidden_layer_image(ldi: LDI) -> np.ndarray:
     return np.where(ldi.hidden_mask[..., None], ldi.hidden_rgb, ldi.rgb).astype(np.float32)
 
 
+JOIN_SIGMA = 8.0
+"""Gaussian sigma, in canvas pixels, of the colour offset :func:`join_photo_painting` measures along the
+photo's edge and carries into the border."""
+
+JOIN_MARGIN = 16
+"""Canvas pixels by which the photo region is mirrored outward before it is painted
+(:func:`photo_with_margin`): the painting's own rim (the network sees zero padding at an image's edge)
+falls in the margin, and the two paintings cross-fade over it."""
+
+
+def join_margin(ldi: LDI) -> int:
+    """The margin of :func:`photo_with_margin` for this LDI: :data:`JOIN_MARGIN`, at most its border."""
+    if not isinstance(ldi, LDI):
+        raise InputError("ldi", f"expected an LDI, got {type(ldi).__name__}")
+    return min(JOIN_MARGIN, ldi.pad)
+
+
+def photo_with_margin(ldi: LDI, image: np.ndarray) -> np.ndarray:
+    """(H + 2 m, W + 2 m, 3) the photo region of a canvas image, mirrored outward by ``m =``
+    :func:`join_margin` pixels: the image the photo region is painted from (a mirror keeps the photo's
+    statistics; the border's own content would not)."""
+    hc, wc = ldi.canvas_size
+    check_shape(image, "image", (hc, wc, 3))
+    rows, cols = ldi.photo_region
+    m = join_margin(ldi)
+    crop = np.ascontiguousarray(image[rows, cols], dtype=np.float32)
+    return cv2.copyMakeBorder(crop, m, m, m, m, cv2.BORDER_REFLECT_101) if m else crop
+
+
+def join_photo_painting(ldi: LDI, canvas_painting: np.ndarray, photo_painting: np.ndarray) -> np.ndarray:
+    """(Hc, Wc, 3) one layer image's painting from two: ``photo_painting``, of the layer image's photo region
+    alone (:func:`photo_with_margin`), inside the photo; ``canvas_painting``, of the whole canvas, in the
+    border, shifted by the smooth colour offset between the two measured along the photo's edge (so the
+    border continues the photo's colours); the two cross-fade over the margin.
+
+    Why two paintings: the 2D network normalises its features by statistics of the whole image it paints;
+    the border (the photo's edges stretched outward, a third of the canvas or more) pulls those statistics
+    away from the photo's, and the photo comes out painted unlike the network paints the photo itself
+    (``docs/quality.md`` measures it). Painted (nearly) alone, the photo gets the network's own rendering.
+    """
+    if not isinstance(ldi, LDI):
+        raise InputError("ldi", f"expected an LDI, got {type(ldi).__name__}")
+    hc, wc = ldi.canvas_size
+    h, w = ldi.photo_size
+    pad, m = ldi.pad, join_margin(ldi)
+    check_shape(canvas_painting, "canvas_painting", (hc, wc, 3))
+    check_shape(photo_painting, "photo_painting", (h + 2 * m, w + 2 * m, 3))
+    out = np.asarray(canvas_painting, np.float32).copy()
+    inner = np.asarray(photo_painting, np.float32)
+    if pad == 0:
+        return inner.copy()
+    photo_rows, photo_cols = ldi.photo_region
+    rows, cols = slice(pad - m, pad + h + m), slice(pad - m, pad + w + m)
+    # the offset at the photo's edge (its edge rows and columns, smoothed), carried straight outward
+    offset = cv2.GaussianBlur(inner[m:m + h, m:m + w] - out[photo_rows, photo_cols], (0, 0), JOIN_SIGMA,
+                              borderType=cv2.BORDER_REFLECT_101)
+    out = np.clip(out + cv2.copyMakeBorder(offset, pad, pad, pad, pad, cv2.BORDER_REPLICATE), 0.0, 1.0)
+    # the photo painting's weight: 1 on the photo, falling linearly to 0 across the margin
+    dy = np.maximum(np.maximum(m - np.arange(h + 2 * m), np.arange(h + 2 * m) - (h + m - 1)), 0)
+    dx = np.maximum(np.maximum(m - np.arange(w + 2 * m), np.arange(w + 2 * m) - (w + m - 1)), 0)
+    weight = np.clip(1.0 - np.maximum(dy[:, None], dx[None, :]) / float(m + 1), 0.0, 1.0)[..., None]
+    out[rows, cols] = weight * inner + (1.0 - weight) * out[rows, cols]
+    return out.astype(np.float32)
+
+
 SEAM_SIGMA = 6.0
 """Gaussian sigma, in canvas pixels, over which :func:`match_hidden_seam` spreads the difference between
 the two layer images from the border into the hidden layer (it fades out over about twice that)."""

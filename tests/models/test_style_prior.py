@@ -129,3 +129,50 @@ def test_keep_readable_adds_the_scene_under_strokes_that_ignore_it():
     assert np.corrcoef(l_out.ravel(), l_in.ravel())[0, 1] > 0.8  # the strokes are still the frame's
     np.testing.assert_array_equal(out[0], out[1])  # one map for every layer
     assert np.isfinite(out[0]).all() and out[0].min() >= 0.0 and out[0].max() <= 1.0
+
+
+def test_paint_at_another_size_keeps_the_images_size_and_paints_coarser_when_smaller(prior):
+    vec = prior.style_vector(_stripes(64, 64))
+    img = _stripes(120, 160, 6.0)
+    assert prior.work_size(120, 160, 64) == (48, 64) and prior.work_size(120, 160) == (96, 128)
+    small, same = prior.paint([img], vec, size=64)[0], prior.paint([img], vec)[0]
+    assert small.shape == same.shape == (120, 160, 3)
+    detail = lambda im: float(np.abs(cv2.Laplacian(im.mean(-1), cv2.CV_32F)).mean())  # noqa: E731
+    assert detail(small) < detail(same)  # painted at 64 px and upsampled: coarser marks
+    for bad in (2, 0, 5000, 64.0, True):
+        with pytest.raises(InputError, match="size"):
+            prior.paint([img], vec, size=bad)
+
+
+def test_the_photo_is_painted_as_the_network_paints_it_whatever_the_border():
+    # The border (the photo's edges stretched outward) must not change how the photo itself is painted:
+    # the network normalises by statistics of the whole image, so the photo region is painted on its own.
+    from dataclasses import replace
+
+    from stylize3d_core.models.style_prior import paint_layer_images
+    from stylize3d_core.scene.ldi import LDISettings, build_ldi
+
+    prior = StylePrior(StylePriorSettings(size=160, threads=1))
+    rgb = _stripes(96, 128, 4.0)
+    depth = np.full((96, 128), 2.0, np.float32)
+    depth[30:70, 40:90] = 1.0
+    ldi = build_ldi(rgb, depth, LDISettings(band=0.2, border=0.25))
+    assert ldi.pad > 16
+    vec = prior.style_vector(np.random.default_rng(0).random((64, 64, 3)).astype(np.float32))
+    layer0, layer1 = paint_layer_images(prior, ldi, vec)
+    assert layer0.shape == layer1.shape == ldi.canvas_size + (3,)
+    assert all(np.isfinite(x).all() and x.min() >= 0 and x.max() <= 1 for x in (layer0, layer1))
+    dark = ldi.rgb.copy()
+    outside = np.ones(ldi.canvas_size, bool)
+    outside[ldi.photo_region] = False
+    dark[outside] = 0.02  # a very different border
+    other0, _ = paint_layer_images(prior, replace(ldi, rgb=dark), vec)
+    assert np.array_equal(other0[ldi.photo_region], layer0[ldi.photo_region])
+    assert not np.allclose(other0[outside], layer0[outside], atol=0.05)
+    # the canvas painted whole, as before, paints the photo differently: the border pulls its statistics
+    whole = prior.paint([ldi.rgb], vec)[0]
+    assert float(np.abs(whole[ldi.photo_region] - layer0[ldi.photo_region]).mean()) > 0.01
+    # without a border there is one painting
+    flat = build_ldi(rgb, np.full((96, 128), 2.0, np.float32), LDISettings(border=0.0))
+    assert flat.pad == 0
+    np.testing.assert_array_equal(paint_layer_images(prior, flat, vec)[0], prior.paint([flat.rgb], vec)[0])

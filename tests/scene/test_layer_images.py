@@ -82,3 +82,62 @@ def test_the_layer_images_and_their_sizes_are_checked(card_ldi):
         match_hidden_seam(card_ldi, layer0, layer1[:-1])
     with pytest.raises(InputError, match="ldi"):
         match_hidden_seam("not an ldi", layer0, layer1)
+
+
+# ----------------------------------------------------------------------------- the photo painted alone
+
+
+def test_photo_with_margin_mirrors_the_photo_region_outward(card_ldi):
+    from stylize3d_core.scene.layer_images import join_margin, photo_with_margin
+
+    ldi = card_ldi
+    m = join_margin(ldi)
+    assert 0 < m <= ldi.pad
+    image = np.random.default_rng(0).random(ldi.canvas_size + (3,)).astype(np.float32)
+    part = photo_with_margin(ldi, image)
+    h, w = ldi.photo_size
+    assert part.shape == (h + 2 * m, w + 2 * m, 3)
+    photo = image[ldi.photo_region]
+    assert np.array_equal(part[m:m + h, m:m + w], photo)
+    assert np.array_equal(part[m - 1, m:m + w], photo[1])  # a mirror (the edge row not repeated)
+    assert np.array_equal(part[m:m + h, m + w], photo[:, w - 2])
+    with pytest.raises(InputError, match="image"):
+        photo_with_margin(ldi, image[1:])
+
+
+def test_join_keeps_the_photo_painting_and_carries_its_colour_into_the_border(card_ldi):
+    from stylize3d_core.scene.layer_images import join_margin, join_photo_painting
+
+    ldi = build_ldi(card_ldi.rgb[card_ldi.photo_region], card_ldi.depth[card_ldi.photo_region] / card_ldi.depth_scale,
+                    LDISettings(band=0.25, border=0.25))  # a border wider than the margin
+    m, pad = join_margin(ldi), ldi.pad
+    h, w = ldi.photo_size
+    rng = np.random.default_rng(1)
+    canvas = np.full(ldi.canvas_size + (3,), 0.3, np.float32) + 0.05 * rng.random(ldi.canvas_size + (3,)).astype(np.float32)
+    photo = np.full((h + 2 * m, w + 2 * m, 3), 0.6, np.float32)  # the photo painted 0.3 lighter, say
+    out = join_photo_painting(ldi, canvas, photo)
+    assert out.shape == canvas.shape and out.dtype == np.float32
+    assert np.array_equal(out[ldi.photo_region], photo[m:m + h, m:m + w])  # the photo: its own painting
+    # the border keeps the canvas painting's texture, shifted by the offset at the edge (here ~0.3 everywhere)
+    far = out[:pad - m, :] - canvas[:pad - m, :]
+    assert abs(float(far.mean()) - 0.275) < 0.02 and float(far.std()) < 0.02
+    assert np.allclose(out[:pad - m] - out[:pad - m].mean(), canvas[:pad - m] - canvas[:pad - m].mean(), atol=0.03)
+    # no step at the photo's edge: across the margin the two cross-fade
+    row = out[pad - m - 2 : pad + 2, pad + w // 2].mean(axis=1)
+    assert np.all(np.abs(np.diff(row)) < 0.06)
+    with pytest.raises(InputError, match="photo_painting"):
+        join_photo_painting(ldi, canvas, photo[1:])
+    with pytest.raises(InputError, match="canvas_painting"):
+        join_photo_painting(ldi, canvas[:, 1:], photo)
+
+
+def test_without_a_border_the_join_is_the_photo_painting(card_ldi):
+    from dataclasses import replace
+
+    from stylize3d_core.scene.layer_images import join_margin, join_photo_painting, photo_with_margin
+
+    ldi = replace(card_ldi, pad=0, rgb=card_ldi.rgb[card_ldi.photo_region])
+    assert join_margin(ldi) == 0
+    img = np.random.default_rng(2).random(ldi.photo_size + (3,)).astype(np.float32)
+    assert np.array_equal(photo_with_margin(ldi, img), img)
+    assert np.array_equal(join_photo_painting(ldi, img * 0.5, img), img)
