@@ -533,8 +533,8 @@ class UNetDecoder(nn.Module):
     HOLE_CONTEXT = 32
     """Pixels of context kept around the uncovered pixels when only they are decoded (a multiple of
     ``2**levels``): the lite U-Net's output at a pixel depends on its input within 16 pixels (two stride-2
-    levels of 3 x 3 convolutions, ``tests/models/test_decoder.py`` checks it), so a crop with this margin
-    decodes its uncovered pixels as the whole frame does, up to float rounding."""
+    levels of 3 x 3 convolutions; ``tests/models/test_decoder_pass_through.py`` checks it), so a crop with
+    this margin decodes its uncovered pixels as the whole frame does, up to float rounding."""
     CROP_FRACTION = 0.5
     """Above this share of the frame the crop around the uncovered pixels is not worth it: the whole frame
     is decoded."""
