@@ -248,17 +248,18 @@ def paint_layer_images(prior: StylePrior, ldi, vector: np.ndarray) -> List[np.nd
     same size in both (the region's share of ``settings.size``), and joined
     (:func:`~stylize3d_core.scene.layer_images.join_photo_painting`): the photo as the network paints the
     photo itself, the border from the canvas's painting, continuing the photo's colours. Without a border
-    the canvas is the photo: one painting each."""
+    the canvas is the photo: one painting each. Without a hidden layer (the depth lifts nothing) its image
+    is layer 0's, and layer 0's painting serves for both."""
     from ..scene.layer_images import hidden_layer_image, join_photo_painting, photo_with_margin
 
-    images = [ldi.rgb, hidden_layer_image(ldi)]
+    images = [ldi.rgb, hidden_layer_image(ldi)] if ldi.hidden_mask.any() else [ldi.rgb]
     canvas = prior.paint(images, vector)
-    if ldi.pad == 0:
-        return canvas
-    parts = [photo_with_margin(ldi, im) for im in images]
-    size = max(STRIDE, int(round(prior.settings.size * max(parts[0].shape[:2]) / max(ldi.canvas_size))))
-    photo = prior.paint(parts, vector, size=size)
-    return [join_photo_painting(ldi, c, p) for c, p in zip(canvas, photo)]
+    if ldi.pad > 0:
+        parts = [photo_with_margin(ldi, im) for im in images]
+        size = max(STRIDE, int(round(prior.settings.size * max(parts[0].shape[:2]) / max(ldi.canvas_size))))
+        photo = prior.paint(parts, vector, size=size)
+        canvas = [join_photo_painting(ldi, c, p) for c, p in zip(canvas, photo)]
+    return canvas if len(canvas) == 2 else [canvas[0], canvas[0].copy()]
 
 
 MAX_GAIN = 4.0

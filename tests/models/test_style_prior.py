@@ -176,3 +176,26 @@ def test_the_photo_is_painted_as_the_network_paints_it_whatever_the_border():
     flat = build_ldi(rgb, np.full((96, 128), 2.0, np.float32), LDISettings(border=0.0))
     assert flat.pad == 0
     np.testing.assert_array_equal(paint_layer_images(prior, flat, vec)[0], prior.paint([flat.rgb], vec)[0])
+
+
+def test_without_a_hidden_layer_layer_zero_is_painted_once_for_both(monkeypatch):
+    from stylize3d_core.models.style_prior import paint_layer_images
+    from stylize3d_core.scene.layer_images import hidden_layer_image
+    from stylize3d_core.scene.ldi import LDISettings, build_ldi
+
+    prior = StylePrior(StylePriorSettings(size=128, threads=1))
+    flat = build_ldi(_stripes(64, 80, 4.0), np.full((64, 80), 2.0, np.float32), LDISettings(border=0.2))
+    assert not flat.hidden_mask.any() and flat.pad > 0
+    vec = prior.style_vector(_stripes(48, 48))
+    calls = []
+    real = StylePrior.paint
+    monkeypatch.setattr(StylePrior, "paint", lambda self, images, *a, **k: calls.append(len(images)) or real(self, images, *a, **k))
+    layer0, layer1 = paint_layer_images(prior, flat, vec)
+    assert calls == [1, 1]  # the canvas and the photo region, one image each
+    np.testing.assert_array_equal(layer0, layer1)
+    assert not np.shares_memory(layer0, layer1)  # two arrays: one may be changed alone
+    # the same as painting the two identical images
+    np.testing.assert_array_equal(hidden_layer_image(flat), flat.rgb)
+    monkeypatch.undo()
+    canvas = prior.paint([flat.rgb, flat.rgb], vec)
+    assert np.array_equal(canvas[0], canvas[1])  # the network paints an image the same way each time
