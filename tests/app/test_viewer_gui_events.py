@@ -17,16 +17,13 @@ import pytest
 
 from viewer_gui_helpers import display  # noqa: F401 (the module's Xvfb, a fixture)
 from viewer_gui_helpers import check_ran, pixels, run_viewer, step, wait_for_step
-from viewer_gui_helpers import xtest as _xtest
+from viewer_gui_helpers import xtest_or_skip
 
 pytestmark = [pytest.mark.gui, pytest.mark.slow]  # each test starts Open3D in a subprocess: 8-30 s
 
 
 def test_real_mouse_drag_and_key_press(display, tmp_path):
-    libs = _xtest()
-    if libs is None:
-        pytest.skip("libXtst is not installed: cannot send real mouse and key events to Xvfb")
-    lx, lt = libs
+    lx, lt = xtest_or_skip()
     steps = [
         {"op": "load_sample"},
         {"op": "wait_idle", "timeout": 120},
@@ -119,10 +116,7 @@ def test_real_events_second_drag_shows_frames_esc_and_close_during_export(displa
     """With the model's cost (an untrained lite checkpoint): a second drag 0.3 s after the first shows
     frames while it moves (the first rest's full frame is interrupted); Esc during an export neither quits
     nor cancels it; closing the window during an export asks first."""
-    libs = _xtest()
-    if libs is None:
-        pytest.skip("libXtst is not installed: cannot send real mouse and key events to Xvfb")
-    lx, lt = libs
+    lx, lt = xtest_or_skip()
     out = tmp_path / "out"
     out.mkdir()
     steps = [
@@ -201,10 +195,7 @@ def test_real_events_second_drag_shows_frames_esc_and_close_during_export(displa
 
 
 def test_real_wheel_up_moves_forwards(display, tmp_path):
-    libs = _xtest()
-    if libs is None:
-        pytest.skip("libXtst is not installed: cannot send real wheel events to Xvfb")
-    lx, lt = libs
+    lx, lt = xtest_or_skip("wheel events")
     steps = [
         {"op": "load_sample"},
         {"op": "wait_idle", "timeout": 120},

@@ -27,14 +27,20 @@ def footprint(pts: torch.Tensor, K: torch.Tensor, pixels) -> torch.Tensor:
     return torch.as_tensor(pixels, dtype=pts.dtype).expand(pts.shape[0]) * pts[:, 2] / K[0, 0]
 
 
+def random_footprints(pts: torch.Tensor, K: torch.Tensor, g: torch.Generator, widest: float) -> torch.Tensor:
+    """Point sizes (N,) covering a random 0.5 .. ``widest`` output pixels each (drawn from ``g``); points
+    behind the camera (a NaN size) get a tiny one."""
+    pixels = 0.5 + (widest - 0.5) * torch.rand(pts.shape[0], generator=g, dtype=F64)
+    return footprint(pts, K, pixels).nan_to_num(0.01)
+
+
 @pytest.mark.parametrize("supersample", [1, 2])
 @pytest.mark.parametrize("seed", range(3))
 def test_grown_splats_match_reference_forward_and_backward(supersample, seed):
     H, W = 8, 9
     pts, feats, K = random_scene(H, W, 60, 3, seed)
     g = torch.Generator().manual_seed(100 + seed)
-    sizes = footprint(pts, K, 0.5 + 3.5 * torch.rand(pts.shape[0], generator=g, dtype=F64))  # 0.5 .. 4 px
-    sizes = sizes.nan_to_num(0.01)
+    sizes = random_footprints(pts, K, g, 4.0)
     settings = RasterSettings(H, W, supersample=supersample)
     assert_matches_reference(pts, feats, K, settings, g, point_size=sizes)
 
@@ -78,7 +84,7 @@ def test_soft_edges_match_reference(supersample, seed):
     H, W = 8, 9
     pts, feats, K = random_scene(H, W, 70, 2, seed)
     g = torch.Generator().manual_seed(200 + seed)
-    sizes = footprint(pts, K, 0.5 + 2.5 * torch.rand(pts.shape[0], generator=g, dtype=F64)).nan_to_num(0.01)
+    sizes = random_footprints(pts, K, g, 3.0)
     settings = RasterSettings(H, W, supersample=supersample, soft_edges=True)
     for size in (None, sizes):
         fast = rasterize_points(pts, feats, K, settings, point_size=size)
@@ -139,7 +145,7 @@ def test_chunked_grown_splats_are_identical_to_one_shot(supersample, chunk, soft
 def test_chunked_grown_splats_with_gradient_are_identical(soft_edges):
     pts, feats, K = random_scene(9, 11, 200, 3, seed=5)
     g = torch.Generator().manual_seed(5)
-    sizes = footprint(pts, K, 0.5 + 3.5 * torch.rand(200, generator=g, dtype=F64)).nan_to_num(0.01)
+    sizes = random_footprints(pts, K, g, 4.0)
     settings = RasterSettings(9, 11, soft_edges=soft_edges)
     fa, fb = feats.clone().requires_grad_(True), feats.clone().requires_grad_(True)
     a = rasterize_points(pts, fa, K, settings, point_size=sizes)
@@ -264,7 +270,7 @@ def test_blend_coverage_matches_reference_and_chunks(supersample, soft_edges, se
     H, W = 8, 9
     pts, feats, K = random_scene(H, W, 90, 3, seed)
     g = torch.Generator().manual_seed(300 + seed)
-    sizes = footprint(pts, K, 0.5 + 3.0 * torch.rand(pts.shape[0], generator=g, dtype=F64)).nan_to_num(0.01)
+    sizes = random_footprints(pts, K, g, 3.5)
     settings = RasterSettings(H, W, supersample=supersample, soft_edges=soft_edges, blend_coverage=True)
     blended = 0
     alpha = (0.1 + 0.9 * torch.rand(pts.shape[0], generator=g, dtype=F64)) * (torch.rand(pts.shape[0], generator=g) < 0.5)

@@ -99,3 +99,11 @@ def step(report: Dict[str, Any], op: str, index: int = 0) -> Dict[str, Any]:
 def xtest():
     """(libX11, libXtst) through ctypes, or None where they are missing."""
     return xtest_libs()
+
+
+def xtest_or_skip(events: str = "mouse and key events"):
+    """(libX11, libXtst), or skip the test where they are missing (it cannot send real ``events``)."""
+    libs = xtest_libs()
+    if libs is None:
+        pytest.skip(f"libXtst is not installed: cannot send real {events} to Xvfb")
+    return libs
