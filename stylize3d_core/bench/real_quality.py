@@ -36,11 +36,33 @@ from .report import Log, markdown_table, quiet
 METRICS = ("style_dist", "edge_f1", "short", "long", "short_dis", "long_dis")
 LABELS = {"style_dist": "style-embedding dist", "edge_f1": "edge F1", "short": "warp short", "long": "warp long",
           "short_dis": "warp short, disoccluded", "long_dis": "warp long, disoccluded"}
+EDGE_METRICS = ("short_edge", "long_edge", "short_dis_edge", "long_dis_edge")
+"""The warp figures again with the single-pixel co-visibility test (``warp_view(one_surface=False)``): samples
+beside depth edges, which mix two surfaces, counted too. Diagnostics beside :data:`METRICS`."""
+EDGE_LABELS = {"short_edge": "warp short", "long_edge": "warp long", "short_dis_edge": "warp short, disoccluded",
+               "long_dis_edge": "warp long, disoccluded"}
+SEAM_RATIOS = (("short", "short_dis"), ("long", "long_dis"), ("short_edge", "short_dis_edge"),
+               ("long_edge", "long_dis_edge"))
+"""(all pixels, disoccluded) metric pairs whose ratio of means over the pairs with disocclusions the report gives."""
+SEAM_LABELS = {"short": "short", "long": "long", "short_edge": "short (single-pixel test)",
+               "long_edge": "long (single-pixel test)"}
 
 
 def _mean(values: List[float]) -> float:
     v = [x for x in values if np.isfinite(x)]
     return float(np.mean(v)) if v else float("nan")
+
+
+def _seam_ratios(per_pair: List[dict], methods: List[str]) -> dict:
+    """Per method, for each (all, disoccluded) pair of :data:`SEAM_RATIOS`: mean disoccluded / mean all, over the
+    pairs whose disoccluded figure is finite (``"pairs"``: how many have the first one)."""
+    out: dict = {"pairs": sum(1 for r in per_pair if methods and np.isfinite(r["methods"][methods[0]]["short_dis"]))}
+    for m in methods:
+        out[m] = {}
+        for a, d in SEAM_RATIOS:
+            rows = [r["methods"][m] for r in per_pair if np.isfinite(r["methods"][m][d])]
+            out[m][a] = _mean([r[d] for r in rows]) / _mean([r[a] for r in rows]) if rows else float("nan")
+    return out
 
 
 def run_real_quality(out: Path, real_dir: str, *, model: Optional[str] = None,
@@ -97,6 +119,8 @@ def run_real_quality(out: Path, real_dir: str, *, model: Optional[str] = None,
         hidden = hidden_views(p3d, cams, H, W)
         short = warp_split(out_frames, cams, geoms, hidden, short_range_pairs(frames))
         long_ = warp_split(out_frames, cams, geoms, hidden, long_range_pairs(frames))
+        short_e = warp_split(out_frames, cams, geoms, hidden, short_range_pairs(frames), one_surface=False)
+        long_e = warp_split(out_frames, cams, geoms, hidden, long_range_pairs(frames), one_surface=False)
         vec = prior.style_vector(style_rgb)
         row: dict = {"pair": name, "photo": photo_path.name, "painting": painting_path.name, "methods": {}}
         for method, fr in out_frames.items():
@@ -107,6 +131,8 @@ def run_real_quality(out: Path, real_dir: str, *, model: Optional[str] = None,
                 "edge_f1": _mean([edge_f1(f, p) for f, p in zip(fr, out_frames["plain"])]),
                 "short": short.all[method], "long": long_.all[method],
                 "short_dis": short.disoccluded[method], "long_dis": long_.disoccluded[method],
+                "short_edge": short_e.all[method], "long_edge": long_e.all[method],
+                "short_dis_edge": short_e.disoccluded[method], "long_dis_edge": long_e.disoccluded[method],
             }
         per_pair.append(row)
         board_pairs.append({"name": name, "photo": p3d.rgb, "painting": style_rgb,
@@ -115,7 +141,8 @@ def run_real_quality(out: Path, real_dir: str, *, model: Optional[str] = None,
             f"{m}: style {v['style_dist']:.2f} F1 {v['edge_f1']:.3f} warp {v['short']:.3f}/{v['long']:.3f}"
             for m, v in row["methods"].items()))
     methods = list(per_pair[0]["methods"]) if per_pair else []
-    means = {m: {q: _mean([r["methods"][m][q] for r in per_pair]) for q in METRICS} for m in methods}
+    means = {m: {q: _mean([r["methods"][m][q] for r in per_pair]) for q in METRICS + EDGE_METRICS} for m in methods}
+    seam = _seam_ratios(per_pair, methods)
     worst = {m: max(per_pair, key=lambda r: r["methods"][m]["style_dist"])["pair"] for m in methods}
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -136,9 +163,18 @@ def run_real_quality(out: Path, real_dir: str, *, model: Optional[str] = None,
         f"{time.perf_counter() - t_start:.0f} s.", "",
         markdown_table(rows, ["method"] + [LABELS[q] for q in METRICS] + ["worst style pair"], digits=3), "",
         "## Ratios", "", markdown_table(ratio_rows, ["ours ×"] + [LABELS[q] for q in METRICS], digits=3), "",
+        "## Seams: disoccluded / all pixels", "",
+        f"Ratio of the means over the {seam['pairs']} pairs with disoccluded pixels (a pair counts where some",
+        "pair of its views has 16 or more).", "",
+        markdown_table([{"method": m, **{SEAM_LABELS[a]: seam[m][a] for a, _ in SEAM_RATIOS}} for m in methods],
+                       ["method"] + [SEAM_LABELS[a] for a, _ in SEAM_RATIOS], digits=3), "",
+        "## Warp with the single-pixel co-visibility test (diagnostic)", "",
+        "Samples beside depth edges, which read two surfaces, counted too.", "",
+        markdown_table([{"method": m, **{EDGE_LABELS[q]: means[m][q] for q in EDGE_METRICS}} for m in methods],
+                       ["method"] + [EDGE_LABELS[q] for q in EDGE_METRICS], digits=3), "",
     ])
     write_atomically(out / "real_quality.md", "report", lambda tmp: tmp.write_text(text, encoding="utf-8"))
-    blob = json.dumps({"means": means, "pairs": per_pair}, indent=1, default=float)
+    blob = json.dumps({"means": means, "seam_ratios": seam, "pairs": per_pair}, indent=1, default=float)
     write_atomically(out / "real_quality.json", "report", lambda tmp: tmp.write_text(blob, encoding="utf-8"))
     return means
 

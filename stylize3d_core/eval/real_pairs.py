@@ -19,7 +19,10 @@ frame:
   the point cloud (:mod:`.consistency`), RMSE over the co-visible pixels, short
   range ``(t, t + 1)`` and long range ``(t, t + 7)``; and the same over only the
   pixels whose surface is the hidden layer (disoccluded: where a seam between
-  the layers would show).
+  the layers would show). A pixel counts where the bilinear sample of the other
+  view reads one surface only (:func:`~.consistency.warp_view`); the bench also
+  reports the figures with the single-pixel test, whose samples beside depth
+  edges mix foreground and background.
 
 **Blind boards** (:func:`write_boards`): for each pair, the photo and the
 painting on top and two methods' frames below in random order ("A", "B"); the
@@ -112,8 +115,9 @@ class WarpSplit(NamedTuple):
 
 def warp_split(frames: Mapping[str, Sequence[np.ndarray]], cameras: Cameras, geometries: Sequence[ViewGeometry],
                hidden: Sequence[torch.Tensor], pairs: Sequence[Tuple[int, int]],
-               depth_tolerance: float = 0.02) -> WarpSplit:
-    """Each method's warp RMSE over ``pairs`` (view i warped into view j), all pixels and disoccluded ones."""
+               depth_tolerance: float = 0.02, one_surface: bool = True) -> WarpSplit:
+    """Each method's warp RMSE over ``pairs`` (view i warped into view j), all pixels and disoccluded ones
+    (``one_surface``: :func:`~.consistency.warp_view`'s)."""
     names = list(frames)
     stacks = [torch.from_numpy(np.concatenate([np.asarray(frames[m][k], np.float32) for m in names], -1))
               .permute(2, 0, 1).contiguous() for k in range(len(cameras))]  # (3 M, H, W)
@@ -121,7 +125,8 @@ def warp_split(frames: Mapping[str, Sequence[np.ndarray]], cameras: Cameras, geo
     dis: Dict[str, List[float]] = {m: [] for m in names}
     with torch.no_grad():
         for i, j in pairs:
-            warp = warp_view(stacks[i], geometries[i], cameras[i], geometries[j], cameras[j], depth_tolerance)
+            warp = warp_view(stacks[i], geometries[i], cameras[i], geometries[j], cameras[j], depth_tolerance,
+                             one_surface)
             if not bool(warp.mask.any()):
                 continue
             hidden_mask = warp.mask & hidden[j]

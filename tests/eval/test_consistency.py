@@ -189,3 +189,42 @@ def test_settings_and_bad_inputs(wall):
     before = [f.copy() for f in frames]
     consistency_metrics(wall.xyz, frames, cams, [(0, 1)])
     assert all(np.array_equal(a, b) for a, b in zip(before, frames))
+
+
+def _flat_card_scene() -> PointCloud:
+    """The card scene with one flat colour per surface (grey wall, red card): a consistent frame of it shows
+    exactly those two colours, and a bilinear sample can differ from them only where it reads both."""
+    cloud = _cloud(card=True)
+    rgb = np.where(cloud.xyz[:, 2:3] < 0.75, np.float32([[0.9, 0.1, 0.1]]), np.float32([[0.4, 0.4, 0.4]]))
+    return PointCloud(cloud.xyz, rgb.astype(np.float32), cloud.label, cloud.image_size, cloud.fov_y_deg)
+
+
+def test_one_surface_warp_counts_only_samples_of_one_surface():
+    scene = _flat_card_scene()
+    cams = _cams([-0.05, 0.05])
+    frames = list(PlainRenderer(scene, PlainRenderSettings(blend_coverage=False)).frames(cams, H, W))
+    pts = torch.from_numpy(scene.xyz)
+    g0, g1 = view_geometry(pts, cams[0], H, W), view_geometry(pts, cams[1], H, W)
+    image0 = torch.from_numpy(frames[0]).permute(2, 0, 1)
+    target = torch.from_numpy(frames[1]).permute(2, 0, 1)
+    strict = warp_view(image0, g0, cams[0], g1, cams[1])
+    loose = warp_view(image0, g0, cams[0], g1, cams[1], one_surface=False)
+    s, lo = strict.mask.numpy(), loose.mask.numpy()
+    assert not (s & ~lo).any()  # the one-surface test only removes pixels
+    dropped = lo & ~s
+    assert 10 < dropped.sum() < 0.1 * lo.sum()  # a thin band beside the card's edges
+    # The dropped pixels are those whose sample mixes card and wall: the sampled colour is neither.
+    sampled = loose.image.numpy()
+    red, grey = np.float32([0.9, 0.1, 0.1])[:, None], np.float32([0.4, 0.4, 0.4])[:, None]
+    off = np.minimum(np.abs(sampled[:, dropped] - red).max(0), np.abs(sampled[:, dropped] - grey).max(0))
+    assert (off > 0.01).mean() > 0.5
+    # Kept pixels sample one surface: exactly its flat colour, as the target shows it.
+    kept = strict.image.numpy()[:, s]
+    assert np.minimum(np.abs(kept - red).max(0), np.abs(kept - grey).max(0)).max() < 1e-4
+    err_strict = np.abs(strict.image.numpy() - target.numpy())[:, s].max()
+    err_loose = np.abs(loose.image.numpy() - target.numpy())[:, lo].max()
+    assert err_strict < 1e-4 < 0.1 < err_loose
+    # Far from the card both tests agree.
+    far = np.ones((H, W), bool)
+    far[8:-8, 8:-8] = False
+    np.testing.assert_array_equal(s[far], lo[far])
