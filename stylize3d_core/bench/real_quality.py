@@ -18,7 +18,9 @@ disoccluded ones. Frame ``board_frame`` of each method is kept; blind boards of
 ``ours`` against each baseline are written with their keys.
 
 Writes to ``out``: ``real_quality.md`` (means, worst pair, ratios), ``real_quality.json`` (every pair),
-``boards_<a>_vs_<b>/board_NN.png`` and ``boards_<a>_vs_<b>_key.json``.
+``boards_<a>_vs_<b>/board_NN.png`` and ``boards_<a>_vs_<b>_key.json``; for the pairs whose hidden layer
+shows, seam boards of ours against stylize-then-bake (:func:`~stylize3d_core.eval.real_pairs.seam_board`),
+``seams_ours_vs_baked/board_NN.png`` and ``seams_ours_vs_baked_key.json``.
 """
 
 from __future__ import annotations
@@ -74,7 +76,8 @@ def run_real_quality(out: Path, real_dir: str, *, model: Optional[str] = None,
     from ..eval.baseline import make_engine, stylize_frames_2d
     from ..eval.consistency import long_range_pairs, short_range_pairs
     from ..eval.quality import baked_colours, baked_renderer, view_geometries
-    from ..eval.real_pairs import edge_f1, hidden_views, style_embedding_distance, warp_split, write_boards
+    from ..eval.real_pairs import (SEAM_CROP, edge_f1, hidden_views, seam_board, seam_crop, style_embedding_distance, warp_split,
+                                   write_boards)
     from ..geometry.trajectories import TrajectorySettings, make_trajectory
     from ..io.atomic import write_atomically
     from ..io.images import load_image
@@ -99,6 +102,7 @@ def run_real_quality(out: Path, real_dir: str, *, model: Optional[str] = None,
     encoder, engine, prior = StyleEncoder(), make_engine(), style_prior(512)
     per_pair: List[dict] = []
     board_pairs: List[dict] = []
+    seam_pairs: List[dict] = []
     for k in range(n):
         photo_path, painting_path = photos[k], paintings[k]
         name = f"{photo_path.stem}+{painting_path.stem}"
@@ -137,6 +141,13 @@ def run_real_quality(out: Path, real_dir: str, *, model: Optional[str] = None,
         per_pair.append(row)
         board_pairs.append({"name": name, "photo": p3d.rgb, "painting": style_rgb,
                             **{m: fr[board_frame] for m, fr in out_frames.items()}})
+        box = seam_crop([h.numpy() for h in hidden], SEAM_CROP)
+        if box is not None:  # the crop with the most hidden layer, in its frame and half a path later
+            t, y0, x0 = box
+            side = SEAM_CROP
+            seam_pairs.append({"name": name, **{m: [fr[k][y0:y0 + side, x0:x0 + side]
+                                                     for k in (t, (t + frames // 2) % frames)]
+                                                 for m, fr in out_frames.items()}})
         log(f"{name}: {time.perf_counter() - t0:.0f} s " + " ".join(
             f"{m}: style {v['style_dist']:.2f} F1 {v['edge_f1']:.3f} warp {v['short']:.3f}/{v['long']:.3f}"
             for m, v in row["methods"].items()))
@@ -148,6 +159,9 @@ def run_real_quality(out: Path, real_dir: str, *, model: Optional[str] = None,
     out.mkdir(parents=True, exist_ok=True)
     for baseline in ("baked", "2d"):
         write_boards(out / f"boards_ours_vs_{baseline}", board_pairs, ("ours", baseline), seed=seed + 1)
+    if seam_pairs:
+        write_boards(out / "seams_ours_vs_baked", seam_pairs, ("ours", "baked"), seed=seed + 3,
+                     compose=lambda pair, a, b: seam_board(pair["plain"], pair[a], pair[b]))
     for other in (others or {}):
         write_boards(out / f"boards_ours_vs_{other}", board_pairs, ("ours", other), seed=seed + 2)
     rows = [{"method": m, **{LABELS[q]: means[m][q] for q in METRICS},

@@ -28,6 +28,9 @@ frame:
 painting on top and two methods' frames below in random order ("A", "B"); the
 key goes to a separate JSON file, so a reviewer who sees only the boards
 judges without knowing which is which (:func:`decode_verdicts` tallies).
+**Seam boards** (:func:`seam_board`): where the hidden layer shows, the crop
+(:func:`seam_crop`) with the most of it, in two frames, unstylized and by two
+methods in random order, enlarged: for a reviewer to judge the seams alone.
 
 Images are (H, W, 3) float in [0, 1].
 """
@@ -37,7 +40,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Dict, List, Mapping, NamedTuple, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, Mapping, NamedTuple, Optional, Sequence, Tuple
 
 import cv2
 import numpy as np
@@ -183,12 +186,63 @@ def board(photo: np.ndarray, painting: np.ndarray, first: np.ndarray, second: np
     return np.concatenate([top, np.ones((gap, width, 3), np.float32), bottom], 0)
 
 
+SEAM_CROP = 128
+"""Side (px) of a seam board's crops."""
+
+
+def seam_crop(hidden: Sequence[np.ndarray], size: int = SEAM_CROP, min_pixels: int = 16) -> Optional[Tuple[int, int, int]]:
+    """``(frame, y0, x0)`` of the ``size`` x ``size`` crop (inside the frame) holding the most hidden-layer
+    pixels of any frame (``hidden``: (H, W) bool per frame, :func:`hidden_views`); None where no frame shows
+    ``min_pixels``."""
+    masks = [np.asarray(h, bool) for h in hidden]
+    if not masks:
+        return None
+    H, W = masks[0].shape
+    s = int(min(size, H, W))
+    best = None
+    for t, m in enumerate(masks):
+        if int(m.sum()) < min_pixels:
+            continue
+        # hidden pixels in the s x s window at each top-left corner (an integral image)
+        ii = np.pad(m.astype(np.int64).cumsum(0).cumsum(1), ((1, 0), (1, 0)))
+        win = ii[s:, s:] - ii[:-s, s:] - ii[s:, :-s] + ii[:-s, :-s]  # (H - s + 1, W - s + 1)
+        y0, x0 = np.unravel_index(int(np.argmax(win)), win.shape)
+        if best is None or win[y0, x0] > best[0]:
+            best = (int(win[y0, x0]), t, int(y0), int(x0))
+    return None if best is None else best[1:]
+
+
+def seam_board(reference: Sequence[np.ndarray], first: Sequence[np.ndarray], second: Sequence[np.ndarray],
+               scale: int = 3, gap: int = 12) -> np.ndarray:
+    """A seam board: one row per frame, the unstylized crop, candidate "A" (``first``) and "B", each
+    enlarged ``scale`` times (nearest neighbour, so a seam is not smoothed away)."""
+    if not (len(reference) == len(first) == len(second)) or not len(first):
+        raise InputError("seam crops", "need the same number (at least one) of crops per column")
+    rows = []
+    for k, crops in enumerate(zip(reference, first, second)):
+        if len({np.shape(c) for c in crops}) != 1:
+            raise InputError("seam crops", f"row {k} mixes sizes {[np.shape(c) for c in crops]}")
+        h, w = crops[0].shape[:2]
+        big = [cv2.resize(np.clip(np.asarray(c, np.float32), 0, 1), (w * scale, h * scale),
+                          interpolation=cv2.INTER_NEAREST) for c in crops]
+        if k == 0:
+            big = [_label(b, t) for b, t in zip(big, ("photo (unstylized)", "A", "B"))]
+        sep = np.ones((h * scale, gap, 3), np.float32)
+        rows.append(np.concatenate([big[0], sep, big[1], sep, big[2]], 1))
+    out = [rows[0]]
+    for r in rows[1:]:
+        out += [np.ones((gap, r.shape[1], 3), np.float32), r]
+    return np.concatenate(out, 0)
+
+
 def write_boards(out_dir: PathLike, pairs: Sequence[Mapping[str, object]], methods: Tuple[str, str],
-                 seed: int = 0) -> Path:
+                 seed: int = 0, compose: Optional[Callable[[Mapping[str, object], str, str], np.ndarray]] = None) -> Path:
     """Write ``board_NN.png`` for each pair and ``key.json`` (which method is A and B on each board).
 
     Each pair is a mapping with ``"name"``, ``"photo"``, ``"painting"`` and the frames of both
-    ``methods`` (one frame each). The order on each board is random (``seed``). Returns the key's path.
+    ``methods`` (one frame each); or, with ``compose`` (``compose(pair, a, b)`` makes the board with
+    method ``a`` as "A"), whatever that reads. The order on each board is random (``seed``). Returns the
+    key's path.
     """
     root = Path(out_dir)
     root.mkdir(parents=True, exist_ok=True)
@@ -197,7 +251,8 @@ def write_boards(out_dir: PathLike, pairs: Sequence[Mapping[str, object]], metho
     for k, pair in enumerate(pairs):
         swap = bool(rng.random() < 0.5)
         a, b = (methods[1], methods[0]) if swap else methods
-        save_image(root / f"board_{k:02d}.png", board(pair["photo"], pair["painting"], pair[a], pair[b]))
+        image = compose(pair, a, b) if compose else board(pair["photo"], pair["painting"], pair[a], pair[b])
+        save_image(root / f"board_{k:02d}.png", image)
         key.append({"board": f"board_{k:02d}.png", "pair": str(pair["name"]), "A": a, "B": b})
     path = root.parent / f"{root.name}_key.json"
     text = json.dumps({"methods": list(methods), "boards": key}, indent=1)
@@ -224,5 +279,5 @@ def decode_verdicts(key_path: PathLike, verdicts: Mapping[str, Mapping[str, str]
     return tally
 
 
-__all__ = ["EDGE_TOLERANCE", "WarpSplit", "board", "decode_verdicts", "edge_f1", "edges", "hidden_views",
-           "style_embedding_distance", "warp_split", "write_boards"]
+__all__ = ["EDGE_TOLERANCE", "SEAM_CROP", "WarpSplit", "board", "decode_verdicts", "edge_f1", "edges", "hidden_views",
+           "seam_board", "seam_crop", "style_embedding_distance", "warp_split", "write_boards"]

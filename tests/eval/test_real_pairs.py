@@ -14,7 +14,8 @@ from stylize3d_core.errors import InputError
 from stylize3d_core.eval.consistency import short_range_pairs
 from stylize3d_core.eval.quality import view_geometries, warp_rmse
 from stylize3d_core.eval.real_pairs import (
-    board, decode_verdicts, edge_f1, hidden_views, style_embedding_distance, warp_split, write_boards,
+    board, decode_verdicts, edge_f1, hidden_views, seam_board, seam_crop, style_embedding_distance, warp_split,
+    write_boards,
 )
 from stylize3d_core.geometry.trajectories import TrajectorySettings, make_trajectory
 from stylize3d_core.io.images import load_image
@@ -96,3 +97,40 @@ def test_boards_and_their_key_round_trip(tmp_path):
     assert tally["pick"] == {"ours": 6, "base": 0} and tally["style"] == {"ours": 0, "base": 0}
     with pytest.raises(InputError):
         board(photo, painting, a, b[:-1])
+
+
+def test_seam_crop_finds_the_frame_and_window_with_most_hidden_pixels():
+    masks = [np.zeros((60, 90), bool) for _ in range(3)]
+    masks[0][5:9, 5:9] = True  # 16 pixels
+    masks[2][40:55, 60:80] = True  # 300 pixels, the most
+    t, y0, x0 = seam_crop(masks, size=32)
+    assert t == 2
+    assert y0 <= 40 and y0 + 32 >= 55 and x0 <= 60 and x0 + 32 >= 80  # the window holds all of it
+    assert 0 <= y0 <= 60 - 32 and 0 <= x0 <= 90 - 32  # inside the frame
+    assert seam_crop([np.zeros((20, 20), bool)]) is None
+    assert seam_crop([masks[0]], size=8, min_pixels=17) is None  # 16 hidden pixels are too few
+    assert seam_crop([], size=8) is None
+    # a crop larger than the frame is as large as its shorter side allows (60 x 60 here)
+    t, y0, x0 = seam_crop([masks[2]], size=500)
+    assert (t, y0) == (0, 0) and 20 <= x0 <= 30
+
+
+def test_seam_board_layout_and_order(tmp_path):
+    ref = [np.full((10, 12, 3), 0.5, np.float32)] * 2
+    dark, light = [np.zeros((10, 12, 3), np.float32)] * 2, [np.ones((10, 12, 3), np.float32)] * 2
+    img = seam_board(ref, dark, light, scale=3, gap=4)
+    assert img.shape == (2 * 30 + 4, 3 * 36 + 2 * 4, 3)
+    row2 = img[34:]  # the second row carries no labels
+    assert np.allclose(row2[:, :36], 0.5) and np.allclose(row2[:, 40:76], 0.0) and np.allclose(row2[:, 80:], 1.0)
+    with pytest.raises(InputError):
+        seam_board(ref, dark[:1], light)
+    with pytest.raises(InputError):
+        seam_board([], [], [])
+    with pytest.raises(InputError):
+        seam_board(ref, [np.zeros((9, 12, 3), np.float32)] * 2, light)
+    pairs = [{"name": f"p{k}", "plain": ref, "ours": dark, "base": light} for k in range(4)]
+    key_path = write_boards(tmp_path / "seams", pairs, ("ours", "base"), seed=5,
+                            compose=lambda pair, a, b: seam_board(pair["plain"], pair[a], pair[b], scale=3, gap=4))
+    for e in json.loads(key_path.read_text())["boards"]:
+        got = load_image(tmp_path / "seams" / e["board"]).rgb
+        assert (got[40:, 40:76].mean() < 0.1) == (e["A"] == "ours")
