@@ -16,6 +16,14 @@ strength               blend + IDW upsampling to every point        ~0.1 s (at t
 camera                 rasterize + U-Net decode                     see benchmarks
 =====================  ==========================================  ==================
 
+**Deferred learned inputs.** A model whose decoder passes covered pixels through (the style prior's
+colours, ``UNetDecoder.passes_covered_colours``: the shipped model) needs its geometry, content features
+and stylizer only where a view has uncovered pixels. Such an instance makes them at the first view that
+has one, or at :meth:`Stylized3DPhoto.prepare`; a view every pixel of which the points cover is the
+rasterized colours, the same pixels the full path gives (``tests/test_stylize_deferred.py``). Most views of
+a 3D photo along its default paths are covered (the LDI's border and hidden layer fill them), so the first
+frame does not wait for the learned parts, and an export along such a path never makes them.
+
 Previews render a random subset of the points (about ``preview_points_per_pixel``
 per output pixel, up to 1/8 more): the points are stored in a fixed
 :class:`~stylize3d_core.render.plain.StratifiedOrder`, so a preview is a prefix
@@ -55,7 +63,8 @@ from .models.stylize3d import Stylize3DModel
 from .points.sampling import start_fps_process
 from .render.plain import StratifiedOrder, preview_point_count
 from .render.rasterize import RASTER_BACKENDS, warm_up_async
-from .render.rasterizer import columns
+from .render.raster_settings import RasterSettings
+from .render.rasterizer import PointRasterizer, columns
 from .scene.layer_images import layer_colours, match_hidden_seam, seam_anchors
 from .scene.photo3d import Photo3D
 
@@ -276,39 +285,29 @@ class Stylized3DPhoto:
         self.photo = photo
         self.timings: Dict[str, float] = {}
         self._style_encoder = style_encoder
-        start_fps_process()  # a no-op when it runs already (load_photo3d starts it)
         warm_up_async()  # the rasterizer's compiled kernels load while the geometry is built
-        t0 = time.perf_counter()
-        pts = photo.points.to_tensors()
-        early: dict = {}
-
-        def in_point_order(transfer: bool = True) -> None:
-            """What needs the points but not their geometry: the point order, the points in it, and their
-            colours ready for the colour transfer (done while the geometry waits for the FPS worker)."""
-            with torch.inference_mode(False):  # ordinary tensors, as if made outside the block below
-                strata = StratifiedOrder(pts.xyz.shape[0], settings.seed)
-                rgb = pts.rgb.detach().float().index_select(0, strata.order)
-                early.update(strata=strata, rgb=rgb, xyz=pts.xyz.detach().float().index_select(0, strata.order))
-                if transfer and self.model.config.detail_transfer:
-                    early["transfer"] = ColourTransfer(rgb)
-
-        with torch.inference_mode():
-            self._geom = prepare_geometry(pts.xyz, pts.rgb, photo.fov_y_deg, photo.size,
-                                          self.model.config.neighbourhood, seed=settings.seed,
-                                          while_waiting=in_point_order)
-            t1 = time.perf_counter()
-            self._content = self.model.encode(self._geom).float()  # (M, C), float32 even under an autocast
-        t2 = time.perf_counter()
-        if not early:  # no wait came (a small cloud): the order now, the colour transfer when first asked
-            in_point_order(transfer=False)
+        # Models whose covered pixels are their points' colours (the style prior's, passed through by the
+        # decoder) need the learned features only where a view has uncovered pixels: the geometry, the
+        # encoder and the stylizer then wait for the first such view (:meth:`prepare`).
+        self._deferred = bool(self.model.config.style_prior and self.model.decoder.passes_covered_colours())
+        if not self._deferred:
+            start_fps_process()  # a no-op when it runs already (load_photo3d starts it)
+        self._geom: Optional[SceneGeometry] = None  # the learned parts' geometry and content features (prepare)
+        self._content: Optional[torch.Tensor] = None  # (M, C)
+        self._in_order: Optional[SceneGeometry] = None
+        self._early: dict = {}
+        if self._deferred:
+            self._in_point_order(transfer=False)
+        else:
+            self._build_features(transfer=True)
+        early = self._early
         self._strata = early["strata"]
         self._order = self._strata.order  # (N,)
         # (N, 3) in self._order, stored as (3, N) (render.rasterizer.columns: the camera transform's fast layout)
         self._xyz = columns(early["xyz"])
-        up = self._geom.upsample  # the upsampling and the colours in self._order: dense features come out ordered
-        self._in_order = self._geom._replace(
-            rgb=early["rgb"],
-            upsample=up._replace(idx=up.idx.index_select(0, self._order), weight=up.weight.index_select(0, self._order)))
+        self._rgb = early["rgb"]  # (N, 3) the photo's colours in self._order
+        self._maps: Optional[Tuple[torch.Tensor, ...]] = None  # the style's features, until the stylizer runs
+        self._maps2: Optional[Tuple[torch.Tensor, ...]] = None  # ... of the second style
         self._stylized: Optional[torch.Tensor] = None  # (M, C) at strength 1
         self._stylized2: Optional[torch.Tensor] = None  # (M, C) of the second style, at strength 1
         self._style_stats: Optional[LabStats] = None  # colour statistics of the style (detail_transfer)
@@ -325,11 +324,64 @@ class Stylized3DPhoto:
         self._palette: Optional[Palette] = None  # the map the last render used (its size's, from self._palettes)
         self._palettes: Dict[tuple, Palette] = {}  # per render size, kind and fit settings (see _palette_for)
         self._strength = settings.strength
+
+    def _in_point_order(self, transfer: bool = True) -> None:
+        """What needs the points but not their geometry: the point order, the points in it, and their
+        colours ready for the colour transfer (done while the geometry waits for the FPS worker)."""
+        if self._early:
+            return
+        pts = self.photo.points.to_tensors()
+        with torch.inference_mode(False):  # ordinary tensors, as if made outside an inference block
+            strata = StratifiedOrder(pts.xyz.shape[0], self.settings.seed)
+            rgb = pts.rgb.detach().float().index_select(0, strata.order)
+            self._early.update(strata=strata, rgb=rgb, xyz=pts.xyz.detach().float().index_select(0, strata.order))
+            if transfer and self.model.config.detail_transfer:
+                self._early["transfer"] = ColourTransfer(rgb)
+
+    def _build_features(self, transfer: bool) -> None:
+        """The geometry of the points (NDC, FPS, neighbourhoods, upsampling) and the encoder's content
+        features; the point order is made while the geometry waits for the FPS worker."""
+        start_fps_process()
+        t0 = time.perf_counter()
+        pts = self.photo.points.to_tensors()
+        with torch.inference_mode():
+            geom = prepare_geometry(pts.xyz, pts.rgb, self.photo.fov_y_deg, self.photo.size,
+                                    self.model.config.neighbourhood, seed=self.settings.seed,
+                                    while_waiting=lambda: self._in_point_order(transfer))
+            t1 = time.perf_counter()
+            self._content = self.model.encode(geom).float()  # (M, C), float32 even under an autocast
+        t2 = time.perf_counter()
+        self._in_point_order(transfer=False)  # no wait came (a small cloud): the colour transfer when first asked
+        order = self._early["strata"].order
+        up = geom.upsample  # the upsampling and the colours in the point order: dense features come out ordered
+        self._in_order = geom._replace(
+            rgb=self._early["rgb"],
+            upsample=up._replace(idx=up.idx.index_select(0, order), weight=up.weight.index_select(0, order)))
+        self._geom = geom
         self.timings.update({"geometry": t1 - t0, "encode": t2 - t1})
+
+    @property
+    def prepared(self) -> bool:
+        """Whether the learned parts' inputs (geometry, content and style features) are made."""
+        return self._geom is not None
+
+    def prepare(self) -> None:
+        """Make the learned parts' inputs now: the geometry, the content features and the stylizer's output
+        for the styles set (seconds at 1 MP). A model whose covered pixels are its points' colours defers
+        them to the first view with an uncovered pixel; a caller with idle time (the viewer, after its first
+        frame) calls this so that such a view does not wait for them."""
+        if self._geom is None:
+            self._build_features(transfer=False)
+        with torch.inference_mode():
+            if self._maps is not None and self._stylized is None:
+                self._stylized = self.model.stylizer.stylize(self._content, self._maps).float()
+            if self._maps2 is not None and self._stylized2 is None:
+                self._stylized2 = self.model.stylizer.stylize(self._content, self._maps2).float()
 
     @property
     def geometry(self) -> SceneGeometry:
         """The photo's prepared geometry (NDC, encoder subset, hierarchy, upsampling weights), in point order."""
+        self.prepare()
         return self._geom
 
     @property
@@ -342,7 +394,7 @@ class Stylized3DPhoto:
 
     @property
     def has_style(self) -> bool:
-        return self._stylized is not None
+        return self._style_stats is not None
 
     def _encoder(self) -> StyleEncoder:
         if self._style_encoder is None:
@@ -353,13 +405,16 @@ class Stylized3DPhoto:
         """Use a new style image (h, w, 3) float in [0, 1]; None removes the style."""
         if style_rgb is None:
             self._stylized = None
+            self._maps = None
             self._style_stats = None
             self._vector = None
         else:
             t0 = time.perf_counter()
             with torch.inference_mode():
-                maps = style_feature_cache(self._encoder()).features(style_tensor(style_rgb)).maps
-                self._stylized = self.model.stylizer.stylize(self._content, maps).float()  # (M, C), float32 after autocast
+                self._maps = style_feature_cache(self._encoder()).features(style_tensor(style_rgb)).maps
+                self._stylized = None
+                if self.prepared:  # else when prepared
+                    self._stylized = self.model.stylizer.stylize(self._content, self._maps).float()  # (M, C) float32
             self._style_stats = lab_stats(style_rgb)
             if self.model.config.style_prior:
                 self._vector = self._prior().style_vector(style_rgb)
@@ -370,13 +425,16 @@ class Stylized3DPhoto:
         """A second style image to mix with the first (None removes it); see :meth:`set_mix`."""
         if style_rgb is None:
             self._stylized2 = None
+            self._maps2 = None
             self._style_stats2 = None
             self._vector2 = None
         else:
             with torch.inference_mode():
                 second = style_tensor(style_rgb, "second style image")
-                maps = style_feature_cache(self._encoder()).features(second).maps
-                self._stylized2 = self.model.stylizer.stylize(self._content, maps).float()  # (M, C), as set_style
+                self._maps2 = style_feature_cache(self._encoder()).features(second).maps
+                self._stylized2 = None
+                if self.prepared:  # else when prepared
+                    self._stylized2 = self.model.stylizer.stylize(self._content, self._maps2).float()  # as set_style
             self._style_stats2 = lab_stats(style_rgb)
             if self.model.config.style_prior:
                 self._vector2 = self._prior().style_vector(style_rgb, "second style image")
@@ -398,7 +456,8 @@ class Stylized3DPhoto:
         self._dense = None
 
     def _update_dense(self) -> None:
-        t0 = time.perf_counter()
+        self.prepare()
+        t0, painting = time.perf_counter(), 0.0
         with torch.inference_mode():
             stylized, stats = self._stylized, self._style_stats
             if stylized is not None and self._stylized2 is not None and self._mix > 0.0:
@@ -412,7 +471,9 @@ class Stylized3DPhoto:
                 if self.model.config.detail_transfer and stats is not None:
                     colours = self._colour_transfer()(stats, self._strength)
                 if self.model.config.style_prior and self._vector is not None:
+                    p0 = time.perf_counter()
                     colours = self._prior_colours()
+                    painting = time.perf_counter() - p0  # timed as "prior" where it paints (not cached)
             target = None
             if (stylized is not None and self._strength > 0.0 and stats is not None and self.settings.match_palette
                     and not self.model.config.style_prior):  # the prior paints the style's palette itself
@@ -425,7 +486,7 @@ class Stylized3DPhoto:
             self._dense = dense.float().contiguous()
         self._palette_target, self._palette = target, None
         self._palettes = {}
-        self.timings["upsample"] = time.perf_counter() - t0
+        self.timings["upsample"] = time.perf_counter() - t0 - painting
 
     def _prior(self) -> StylePrior:
         return style_prior(self.settings.prior_size)
@@ -465,7 +526,7 @@ class Stylized3DPhoto:
 
     def _colour_transfer(self) -> ColourTransfer:
         if self._transfer is None:
-            self._transfer = ColourTransfer(self._in_order.rgb)
+            self._transfer = ColourTransfer(self._rgb)
         return self._transfer
 
     PALETTE_FIT_MAX = 1024
@@ -527,6 +588,10 @@ class Stylized3DPhoto:
         :class:`~stylize3d_core.errors.RenderInterrupted` (nothing is cached
         from a stopped render).
         """
+        if self._dense is None and self._deferred:
+            rgb = self._render_colours(camera, height, width, preview=preview, should_stop=should_stop)
+            if rgb is not None:
+                return rgb.permute(1, 2, 0).contiguous().numpy()
         if self._dense is None:  # upsampled lazily: a style set right after construction is not done twice
             self._update_dense()
         pal = None if self._palette_target is None else self._palette_for(height, width, should_stop, preview)
@@ -535,6 +600,40 @@ class Stylized3DPhoto:
         if pal is not None:
             rgb = apply_palette(rgb, pal.matrix)
         return rgb.permute(1, 2, 0).contiguous().numpy()
+
+    def _point_colours(self) -> torch.Tensor:
+        """(N, 3) the colours a covered pixel shows, in point order (the decoder's pass-through input):
+        the style prior's painting, or the photo's colours without a style or at strength 0."""
+        if self._vector is not None and self._strength > 0.0:
+            return self._prior_colours()
+        return self._rgb
+
+    def _render_colours(self, camera: Cameras, height: int, width: int, *, preview: bool,
+                        should_stop: Optional[Callable[[], bool]]) -> Optional[torch.Tensor]:
+        """The view (3, H, W) from the points' colours alone, where every pixel of it is covered: what
+        :meth:`_render_model` returns there (the decoder passes covered pixels through; the same points,
+        margin and rasterizer, so the same pixels), without the learned features. None where a pixel is
+        uncovered or the view supersamples (the decoder is needed)."""
+        st = self.settings
+        if not preview and st.supersample != 1:
+            return None
+        per_pixel = st.preview_points_per_pixel if preview else st.final_points_per_pixel
+        margin = st.preview_border_margin if preview else st.border_margin
+        camera, m = _with_margin(camera, height, margin, 2 ** self.model.config.decoder.levels)
+        n = self.num_points
+        keep = n if per_pixel is None else self._strata.prefix(
+            preview_point_count(n, height + 2 * m, width + 2 * m, per_pixel))
+        colours = self._point_colours()
+        with torch.inference_mode():
+            if should_stop is not None and should_stop():
+                raise RenderInterrupted("render stopped before rasterizing")
+            settings = RasterSettings(height=height + 2 * m, width=width + 2 * m, backend=st.rasterizer)
+            frags = PointRasterizer(settings)(self._xyz[:keep], colours[:keep], camera, should_stop=should_stop,
+                                              features_finite=True)
+            if bool(frags.hole[m : m + height, m : m + width].any()):
+                return None
+            rgb = frags.image[:, m : m + height, m : m + width]
+            return torch.nan_to_num(rgb.float(), nan=0.0).clamp_(0.0, 1.0)
 
     def _render_model(self, camera: Cameras, height: int, width: int, *, preview: bool,
                       should_stop: Optional[Callable[[], bool]], every_point: bool = False) -> torch.Tensor:

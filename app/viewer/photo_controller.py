@@ -131,8 +131,11 @@ class PhotoController(Controller):
 
     def _stylize_ready(self, r: StylizeInfo) -> None:
         self._set_stylize_available(r.available, r.message)
-        self.window.set_busy(f"Ready (point cloud encoded in {r.seconds:.1f} s)" if r.available else "Ready", None)
-        self.window.view_changed()
+        self.window.set_busy(f"Ready (model set up in {r.seconds:.1f} s)" if r.available else "Ready", None)
+        self.window.view_changed()  # requested before the task below: the first stylized frame does not wait
+        if r.available:
+            w = self.window
+            self.submit("prepare model", w.session.prepare_model_features, lambda _r: None, key="prepare model")
 
     def _stylize_failed(self, name: str, e: BaseException) -> None:
         self._set_stylize_available(False, NO_MODEL)

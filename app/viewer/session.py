@@ -231,6 +231,14 @@ class ViewerSession:
         stage = "" if ck.stage == 2 else f" (stage {ck.stage}: no style training)"
         return StylizeInfo(True, f"model {self.checkpoint_path().name}{stage}", time.perf_counter() - t0)
 
+    def prepare_model_features(self) -> None:
+        """Make the model's learned inputs for the current photo and styles now (seconds at 1 MP; see
+        ``Stylized3DPhoto.prepare``), so that no later view waits for them. The viewer runs it as a task
+        once the first stylized frame is on screen: views whose every pixel the points cover never need
+        them, and the first frame does not wait for them."""
+        if self._stylized is not None:
+            self._stylized.prepare()
+
     # -- style and strength ----------------------------------------------------------
     def load_style(self, path: str) -> Tuple[int, int]:
         """Read a style image and apply it (re-using the encoded point cloud); returns its (h, w)."""

@@ -288,3 +288,19 @@ def test_shown_as_scales_a_preview_to_the_full_frame():
     out = shown_as(small, (8, 12, 3))
     assert out.shape == (8, 12, 3) and (out == [10, 200, 40]).all()
     assert shown_as(small, small.shape) is small
+
+
+def test_the_shipped_model_shows_a_stylized_view_before_its_learned_inputs_are_made(plain):
+    """prepare_stylized leaves the shipped model's geometry and features to prepare_model_features (the viewer's
+    task after the first stylized frame); the frames are the same before and after."""
+    s = ViewerSession()
+    s.load_photo(PhotoSpec(str(SAMPLE_PHOTO), "prior", max_size=MAX_SIZE))
+    s.load_style(str(SAMPLE_STYLE))
+    assert s.prepare_stylized().available
+    first = render(s, stylized=True)
+    assert not s._stylized.prepared  # the home view is covered: the points' painted colours
+    s.prepare_model_features()
+    assert s._stylized.prepared
+    np.testing.assert_array_equal(render(s, stylized=True), first)
+    s.prepare_model_features()  # a second call (a repeated task) costs nothing and changes nothing
+    np.testing.assert_array_equal(render(s, stylized=True), first)
