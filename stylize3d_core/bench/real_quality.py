@@ -12,7 +12,8 @@ a seeded shuffle with the k-th painting of another. For each pair the first
 * ``baked``: stylize-then-bake.
 
 and measured (:mod:`stylize3d_core.eval.real_pairs`): style-embedding distance
-(mean over every ``style_every``-th frame), content edge F1 against the plain
+(mean over every ``style_every``-th frame; the plain photo's own too: how far the
+unstyled photo is from the painting), content edge F1 against the plain
 frame, warp RMSE short / long over all co-visible pixels and over the
 disoccluded ones. Frame ``board_frame`` of each method is kept; blind boards of
 ``ours`` against each baseline are written with their keys.
@@ -127,9 +128,7 @@ def run_real_quality(out: Path, real_dir: str, *, model: Optional[str] = None,
         long_e = warp_split(out_frames, cams, geoms, hidden, long_range_pairs(frames), one_surface=False)
         vec = prior.style_vector(style_rgb)
         row: dict = {"pair": name, "photo": photo_path.name, "painting": painting_path.name, "methods": {}}
-        for method, fr in out_frames.items():
-            if method == "plain":
-                continue
+        for method, fr in out_frames.items():  # "plain" too: the unstyled photo's figures are the floor
             row["methods"][method] = {
                 "style_dist": _mean([style_embedding_distance(f, vec, prior) for f in fr[::style_every]]),
                 "edge_f1": _mean([edge_f1(f, p) for f, p in zip(fr, out_frames["plain"])]),
@@ -150,8 +149,8 @@ def run_real_quality(out: Path, real_dir: str, *, model: Optional[str] = None,
                                                  for m, fr in out_frames.items()}})
         log(f"{name}: {time.perf_counter() - t0:.0f} s " + " ".join(
             f"{m}: style {v['style_dist']:.2f} F1 {v['edge_f1']:.3f} warp {v['short']:.3f}/{v['long']:.3f}"
-            for m, v in row["methods"].items()))
-    methods = list(per_pair[0]["methods"]) if per_pair else []
+            for m, v in row["methods"].items() if m != "plain"))
+    methods = [m for m in per_pair[0]["methods"] if m != "plain"] + ["plain"] if per_pair else []  # plain last
     means = {m: {q: _mean([r["methods"][m][q] for r in per_pair]) for q in METRICS + EDGE_METRICS} for m in methods}
     seam = _seam_ratios(per_pair, methods)
     worst = {m: max(per_pair, key=lambda r: r["methods"][m]["style_dist"])["pair"] for m in methods}
