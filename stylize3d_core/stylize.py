@@ -20,7 +20,8 @@ camera                 rasterize + U-Net decode                     see benchmar
 colours, ``UNetDecoder.passes_covered_colours``: the shipped model) needs its geometry, content features
 and stylizer only where a view has uncovered pixels. Such an instance makes them at the first view that
 has one, or at :meth:`Stylized3DPhoto.prepare`; a view every pixel of which the points cover is the
-rasterized colours, the same pixels the full path gives (``tests/test_stylize_deferred.py``). Most views of
+rasterized colours (prepared or not: a 3-channel raster), the same pixels the full path gives
+(``tests/test_stylize_deferred.py``). Most views of
 a 3D photo along its default paths are covered (the LDI's border and hidden layer fill them), so the first
 frame does not wait for the learned parts, and an export along such a path never makes them.
 
@@ -362,14 +363,20 @@ class Stylized3DPhoto:
 
     @property
     def prepared(self) -> bool:
-        """Whether the learned parts' inputs (geometry, content and style features) are made."""
+        """Whether the learned parts' geometry and content features are made."""
         return self._geom is not None
 
     def prepare(self) -> None:
-        """Make the learned parts' inputs now: the geometry, the content features and the stylizer's output
-        for the styles set (seconds at 1 MP). A model whose covered pixels are its points' colours defers
-        them to the first view with an uncovered pixel; a caller with idle time (the viewer, after its first
-        frame) calls this so that such a view does not wait for them."""
+        """Make the learned parts' inputs now: the geometry, the content features, the stylizer's output
+        for the styles set and the features upsampled to every point (seconds at 1 MP). A model whose
+        covered pixels are its points' colours defers them to the first view with an uncovered pixel; a
+        caller with idle time (the viewer, after its first frame) calls this so that such a view does not
+        wait for them."""
+        if self._dense is None:
+            self._update_dense()
+
+    def _prepare_sparse(self) -> None:
+        """The geometry, the content features and the stylizer's output for the styles set."""
         if self._geom is None:
             self._build_features(transfer=False)
         with torch.inference_mode():
@@ -381,7 +388,7 @@ class Stylized3DPhoto:
     @property
     def geometry(self) -> SceneGeometry:
         """The photo's prepared geometry (NDC, encoder subset, hierarchy, upsampling weights), in point order."""
-        self.prepare()
+        self._prepare_sparse()
         return self._geom
 
     @property
@@ -456,7 +463,7 @@ class Stylized3DPhoto:
         self._dense = None
 
     def _update_dense(self) -> None:
-        self.prepare()
+        self._prepare_sparse()
         t0, painting = time.perf_counter(), 0.0
         with torch.inference_mode():
             stylized, stats = self._stylized, self._style_stats
@@ -588,7 +595,7 @@ class Stylized3DPhoto:
         :class:`~stylize3d_core.errors.RenderInterrupted` (nothing is cached
         from a stopped render).
         """
-        if self._dense is None and self._deferred:
+        if self._deferred:  # covered views: the colours alone (a 3-channel raster), prepared or not
             rgb = self._render_colours(camera, height, width, preview=preview, should_stop=should_stop)
             if rgb is not None:
                 return rgb.permute(1, 2, 0).contiguous().numpy()

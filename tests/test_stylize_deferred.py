@@ -39,10 +39,25 @@ def style():
     return np.repeat(np.repeat(g.random((8, 8, 3), dtype=np.float32), 8, 0), 8, 1)
 
 
+class Eager:
+    """The reference: every view through the whole model (rasterized features, the decoder), prepared first."""
+
+    def __init__(self, photo, checkpoint):
+        self.s = Stylized3DPhoto(photo, checkpoint, SETTINGS)
+
+    def __getattr__(self, name):
+        return getattr(self.s, name)
+
+    def render(self, camera, height, width, preview=False):
+        self.s.prepare()
+        rgb = self.s._render_model(camera, height, width, preview=preview, should_stop=None)
+        assert self.s.palette is None  # the prior paints the palette: nothing after the model
+        return rgb.permute(1, 2, 0).contiguous().numpy()
+
+
 def _pair(photo, checkpoint, style):
-    lazy = Stylized3DPhoto(photo, checkpoint, SETTINGS)
-    eager = Stylized3DPhoto(photo, checkpoint, SETTINGS)
-    eager.prepare()
+    lazy, eager = Stylized3DPhoto(photo, checkpoint, SETTINGS), Eager(photo, checkpoint)
+    eager.s.prepare()
     for s in (lazy, eager):
         s.set_style(style)
     return lazy, eager
@@ -64,8 +79,8 @@ def test_covered_views_need_no_learned_features_and_match_the_eager_frames(photo
             a = lazy.render(cam, H, W, preview=preview)
             b = eager.render(cam, H, W, preview=preview)
             np.testing.assert_array_equal(a, b)
-    assert not lazy.prepared and eager.prepared
-    assert "geometry" not in lazy.timings and "geometry" in eager.timings
+    assert not lazy.prepared and eager.s.prepared
+    assert "geometry" not in lazy.timings and "geometry" in eager.s.timings
     lazy.set_strength(0.4)  # strength and removal of the style stay on the colours
     eager.set_strength(0.4)
     np.testing.assert_array_equal(lazy.render(cams[0], H, W), eager.render(cams[0], H, W))
@@ -100,8 +115,9 @@ def test_styles_set_before_preparing_are_stylized_when_prepared(photo, checkpoin
     assert lazy._stylized is None and lazy._stylized2 is None  # nothing of the stylizer ran yet
     geometry = lazy.geometry  # asking for the geometry prepares
     assert geometry is not None and lazy.prepared
-    torch.testing.assert_close(lazy._stylized, eager._stylized, rtol=0, atol=0)
-    torch.testing.assert_close(lazy._stylized2, eager._stylized2, rtol=0, atol=0)
+    eager.s.prepare()
+    torch.testing.assert_close(lazy._stylized, eager.s._stylized, rtol=0, atol=0)
+    torch.testing.assert_close(lazy._stylized2, eager.s._stylized2, rtol=0, atol=0)
     far = _far_camera(photo.fov_y_deg)
     np.testing.assert_array_equal(lazy.render(far, H, W), eager.render(far, H, W))
 
@@ -111,3 +127,25 @@ def test_models_whose_decoder_changes_covered_pixels_prepare_at_once(photo, tmp_
     path = save_checkpoint(tmp_path / "plain.safetensors", Stylize3DModel(ModelConfig.lite()), 2, {})
     s = Stylized3DPhoto(photo, path, SETTINGS)
     assert s.prepared and "geometry" in s.timings
+
+
+def test_a_prepared_instance_still_renders_covered_views_from_the_colours(photo, checkpoint, style):
+    """After prepare (the viewer's idle task) and after a view with uncovered pixels, covered views keep the
+    3-channel raster of the colours: the same pixels as the whole model."""
+    lazy, eager = _pair(photo, checkpoint, style)
+    lazy.prepare()
+    assert lazy.prepared and lazy._dense is not None
+    far = _far_camera(photo.fov_y_deg)
+    np.testing.assert_array_equal(lazy.render(far, H, W), eager.render(far, H, W))
+    home = Cameras.identity(photo.fov_y_deg)
+    want = eager.render(home, H, W)  # (the two instances share the checkpoint's model: render it first)
+    calls = []
+    original = lazy.model.render_view
+    lazy.model.render_view = lambda *a, **k: calls.append(1) or original(*a, **k)
+    try:
+        np.testing.assert_array_equal(lazy.render(home, H, W), want)
+        assert not calls  # the covered view did not go through the model's raster and decoder
+        lazy.render(far, H, W)
+        assert calls  # the view with uncovered pixels did
+    finally:
+        del lazy.model.render_view
