@@ -624,12 +624,7 @@ class Stylized3DPhoto:
         st = self.settings
         if not preview and st.supersample != 1:
             return None
-        per_pixel = st.preview_points_per_pixel if preview else st.final_points_per_pixel
-        margin = st.preview_border_margin if preview else st.border_margin
-        camera, m = _with_margin(camera, height, margin, 2 ** self.model.config.decoder.levels)
-        n = self.num_points
-        keep = n if per_pixel is None else self._strata.prefix(
-            preview_point_count(n, height + 2 * m, width + 2 * m, per_pixel))
+        camera, m, _, keep = self._view_plan(camera, height, width, preview=preview)
         colours = self._point_colours()
         with torch.inference_mode():
             if should_stop is not None and should_stop():
@@ -642,11 +637,10 @@ class Stylized3DPhoto:
             rgb = frags.image[:, m : m + height, m : m + width]
             return torch.nan_to_num(rgb.float(), nan=0.0).clamp_(0.0, 1.0)
 
-    def _render_model(self, camera: Cameras, height: int, width: int, *, preview: bool,
-                      should_stop: Optional[Callable[[], bool]], every_point: bool = False) -> torch.Tensor:
-        """The model's view (3, H, W) float32 in [0, 1], before the palette map (``every_point``: a preview
-        render, i.e. no supersampling, of all the points at full-size decoding)."""
-        n = self.num_points
+    def _view_plan(self, camera: Cameras, height: int, width: int, *, preview: bool,
+                   every_point: bool = False) -> Tuple[Cameras, int, int, int]:
+        """How a view is rasterized: the camera widened by the border margin, the margin ``m`` in pixels, the
+        supersampling factor, and how many points of the stored order it draws (a preview: a prefix)."""
         st = self.settings
         if every_point:
             ss, per_pixel, margin = 1, None, st.border_margin
@@ -655,8 +649,17 @@ class Stylized3DPhoto:
         else:
             ss, per_pixel, margin = st.supersample, st.final_points_per_pixel, st.border_margin
         camera, m = _with_margin(camera, height, margin, 2 ** self.model.config.decoder.levels)
+        n = self.num_points
         keep = n if per_pixel is None else self._strata.prefix(
             preview_point_count(n, (height + 2 * m) * ss, (width + 2 * m) * ss, per_pixel))
+        return camera, m, ss, keep
+
+    def _render_model(self, camera: Cameras, height: int, width: int, *, preview: bool,
+                      should_stop: Optional[Callable[[], bool]], every_point: bool = False) -> torch.Tensor:
+        """The model's view (3, H, W) float32 in [0, 1], before the palette map (``every_point``: a preview
+        render, i.e. no supersampling, of all the points at full-size decoding)."""
+        st = self.settings
+        camera, m, ss, keep = self._view_plan(camera, height, width, preview=preview, every_point=every_point)
         decoded = (height + 2 * m) * (width + 2 * m)  # the U-Net's pixels
         runtime = decoder_onnx.onnx_unet(self.model.decoder) if st.decode_onnx(decoded) else None
         with torch.inference_mode():

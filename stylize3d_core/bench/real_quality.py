@@ -144,8 +144,8 @@ def run_real_quality(out: Path, real_dir: str, *, model: Optional[str] = None,
         if box is not None:  # the crop with the most hidden layer, in its frame and half a path later
             t, y0, x0 = box
             side = SEAM_CROP
-            seam_pairs.append({"name": name, **{m: [fr[k][y0:y0 + side, x0:x0 + side]
-                                                     for k in (t, (t + frames // 2) % frames)]
+            seam_pairs.append({"name": name, **{m: [fr[f][y0:y0 + side, x0:x0 + side]
+                                                     for f in (t, (t + frames // 2) % frames)]
                                                  for m, fr in out_frames.items()}})
         log(f"{name}: {time.perf_counter() - t0:.0f} s " + " ".join(
             f"{m}: style {v['style_dist']:.2f} F1 {v['edge_f1']:.3f} warp {v['short']:.3f}/{v['long']:.3f}"
