@@ -375,6 +375,14 @@ class Stylized3DPhoto:
         if self._dense is None:
             self._update_dense()
 
+    def needs_learned_parts(self, camera: Cameras, height: int, width: int, *, preview: bool = False) -> bool:
+        """Whether :meth:`render` of this view runs the learned parts (geometry, encoder, stylizer, U-Net):
+        always for a model that is not deferred; for one that is, where a pixel of the view is uncovered or
+        the view supersamples. Rasterizes the view's colours to find out (about a render's time)."""
+        if not self._deferred:
+            return True
+        return self._render_colours(camera, height, width, preview=preview, should_stop=None) is None
+
     def _prepare_sparse(self) -> None:
         """The geometry, the content features and the stylizer's output for the styles set."""
         if self._geom is None:

@@ -2,6 +2,8 @@
 with an uncovered pixel, for models whose covered pixels are their points' colours; every frame is the one
 the eager path renders."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import torch
@@ -93,6 +95,13 @@ def test_covered_views_need_no_learned_features_and_match_the_eager_frames(photo
 def test_an_uncovered_pixel_prepares_the_learned_parts(photo, checkpoint, style):
     lazy, eager = _pair(photo, checkpoint, style)
     far = _far_camera(photo.fov_y_deg)
+    home = Cameras.identity(photo.fov_y_deg)
+    assert lazy.needs_learned_parts(far, H, W) and not lazy.needs_learned_parts(home, H, W)
+    assert not lazy.needs_learned_parts(home, H, W, preview=True)
+    assert not lazy.prepared  # asking does not prepare
+    lazy.settings = replace(SETTINGS, supersample=2)  # a supersampled frame runs the U-Net; a preview does not
+    assert lazy.needs_learned_parts(home, H, W) and not lazy.needs_learned_parts(home, H, W, preview=True)
+    lazy.settings = SETTINGS
     want = eager.render(far, H, W)
     got = lazy.render(far, H, W)
     assert lazy.prepared and "geometry" in lazy.timings
@@ -127,6 +136,7 @@ def test_models_whose_decoder_changes_covered_pixels_prepare_at_once(photo, tmp_
     path = save_checkpoint(tmp_path / "plain.safetensors", Stylize3DModel(ModelConfig.lite()), 2, {})
     s = Stylized3DPhoto(photo, path, SETTINGS)
     assert s.prepared and "geometry" in s.timings
+    assert s.needs_learned_parts(Cameras.identity(photo.fov_y_deg), H, W)  # every view runs the decoder
 
 
 def test_a_prepared_instance_still_renders_covered_views_from_the_colours(photo, checkpoint, style):

@@ -111,6 +111,7 @@ def measure(megapixels: float, frame: int, preview: int, video_frames: int, rend
             st.set_style(style)
             out["restyle_s"] = float(np.median(restyle)) if restyle else math.nan
             Hp, Wp = frame_size(p3d.size, preview)
+            every_point = st.settings  # the preview and full frames' settings
             prev, full, prev_db = [], [], []
             st.render(cams[1], Hp, Wp, preview=True)  # warm-up at each size
             st.render(cams[1], H, W)
@@ -154,7 +155,18 @@ def measure(megapixels: float, frame: int, preview: int, video_frames: int, rend
             write_video(Path(tmp) / "video.mp4", st.frames(cams[:video_frames], H, W), fps=30,
                         n_frames=video_frames)
             out["video_s"] = time.perf_counter() - t0
-            out["prepared"] = st.prepared  # whether any measured view had an uncovered pixel
+            # which measured views needed the learned parts (an uncovered pixel), found after the timing
+            measured = [cams[(7 * k + 3) % len(cams)] for k in range(renders)]
+            st.settings = every_point
+            out["learned_views"] = {
+                "previews": sum(st.needs_learned_parts(c, Hp, Wp, preview=True) for c in measured),
+                "full frames": sum(st.needs_learned_parts(c, H, W) for c in measured)}
+            st.settings = export
+            out["learned_views"].update({
+                "export frames": sum(st.needs_learned_parts(c, H, W) for c in measured),
+                "video frames": sum(st.needs_learned_parts(cams[k], H, W) for k in range(video_frames))})
+            out["measured_views"] = {"previews": renders, "full frames": renders, "export frames": renders,
+                                     "video frames": video_frames}
     out["peak_rss_gib"] = peak_rss_gib()
     return out
 
@@ -216,10 +228,10 @@ def run_targets(out: Path, quick: bool = False, show_progress: bool = False, log
         f"{one['warm_up_s']:.2f} s",
         f"export default: {one['export_settings']}; peak memory at 1 MP {one['peak_rss_gib']:.2f} GiB; "
         f"at {bh * bw / 1e6:.2g} MP with the learned parts made (Stylized3DPhoto.prepare)",
-        ("a measured view had uncovered pixels: the learned parts were made and ran on them" if one.get("prepared")
-         else "every measured view was covered by the points: the frames are the rasterized prior colours, and "
-              "the learned parts (geometry, encoder, stylizer, U-Net) were never needed (Stylized3DPhoto "
-              "defers them; `bench floor` times the whole U-Net)"),
+        "measured views with an uncovered pixel, which run the learned parts (geometry, encoder, stylizer, "
+        "U-Net; Stylized3DPhoto.needs_learned_parts); the others are the rasterized prior colours: "
+        + ", ".join(f"{kind} {n} of {one['measured_views'][kind]}" for kind, n in one["learned_views"].items())
+        + " (`bench floor` times the whole U-Net)",
         "decoder in bfloat16 (StylizeSettings.bfloat16 None: this CPU computes bfloat16 natively): "
         f"{'yes' if one.get('bfloat16') else 'no'}; the references of the error rows are float32"])
     log("targets: " + "; ".join(f"{r['what'].split(',')[0]} {r['measured']:.3g} {r['unit']}" for r in rows))

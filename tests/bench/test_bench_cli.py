@@ -1,6 +1,7 @@
 """``stylize3d bench speed|skips|stress --quick``: the tables are written and have the expected structure."""
 
 import json
+import re
 
 import cv2
 import pytest
@@ -72,6 +73,13 @@ def test_bench_targets_quick(tmp_path):
         assert value > 0
         bound = float(r["target"].split()[1])
         assert r["met"] == (value >= bound if r["target"].startswith(">=") else value <= bound)
+    text = (tmp_path / "targets.md").read_text()
+    # how many measured views ran the learned parts, of how many, per kind (counts found, not assumed)
+    counts = re.search(r"previews (\d+) of (\d+), full frames (\d+) of (\d+), export frames (\d+) of (\d+), "
+                       r"video frames (\d+) of (\d+)", text)
+    assert counts, text
+    n = [int(v) for v in counts.groups()]
+    assert all(0 <= n[k] <= n[k + 1] and n[k + 1] > 0 for k in range(0, 8, 2))
 
 
 def test_choose_takes_the_bfloat16_decoder_but_not_threads_the_rasterizer_path_or_the_style_cnn():
