@@ -395,7 +395,8 @@ class Stylized3DPhoto:
 
     @property
     def geometry(self) -> SceneGeometry:
-        """The photo's prepared geometry (NDC, encoder subset, hierarchy, upsampling weights), in point order."""
+        """The photo's prepared geometry (NDC, encoder subset, hierarchy, upsampling weights), in point order;
+        a deferred model makes it (and the content and style features) at this first access."""
         self._prepare_sparse()
         return self._geom
 
